@@ -1,0 +1,27 @@
+// The `viscoscope` sub-commands. Each file cli/<name>_command.cpp adds one sub-command to the app
+// and returns it with the callback that runs it; main() maps exceptions to DESIGN.md's exit codes.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <atomic>
+#include <functional>
+
+namespace viscoscope::cli {
+
+// Set by SIGINT/SIGTERM. Long commands poll it, save their state and return kExitCancelled.
+extern std::atomic<bool> g_cancelRequested;
+
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitInternal = 1;
+inline constexpr int kExitBadInput = 2;
+inline constexpr int kExitCancelled = 3;
+
+struct Command {
+    CLI::App* sub;
+    std::function<int()> run;  // called only when `sub` was parsed
+};
+
+Command addSimulateCommand(CLI::App& app);
+
+}  // namespace viscoscope::cli

@@ -1,0 +1,48 @@
+// Entry point: registers the sub-commands, installs the cancel signal handlers, and maps errors to
+// exit codes (0 ok, 2 bad input with a one-line reason, 3 cancelled, 1 internal error).
+#include "cli/commands.h"
+#include "scene/scene.h"
+
+#include <csignal>
+#include <iostream>
+#include <vector>
+
+namespace viscoscope::cli {
+std::atomic<bool> g_cancelRequested{false};
+}
+
+namespace {
+extern "C" void requestCancel(int) { viscoscope::cli::g_cancelRequested = true; }
+}  // namespace
+
+int main(int argc, char** argv) {
+    using namespace viscoscope;
+    CLI::App app{"Viscoscope: identify a liquid's viscosity from video, and simulate it."};
+    app.set_version_flag("--version", std::string(VISCOSCOPE_VERSION));
+    app.require_subcommand(1);
+
+    const std::vector<cli::Command> commands{
+        cli::addSimulateCommand(app),
+    };
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        const int code = app.exit(e);
+        return code == 0 ? cli::kExitOk : cli::kExitBadInput;
+    }
+
+    std::signal(SIGINT, requestCancel);
+    std::signal(SIGTERM, requestCancel);
+    try {
+        for (const cli::Command& command : commands)
+            if (command.sub->parsed()) return command.run();
+        return cli::kExitBadInput;
+    } catch (const InputError& e) {
+        std::cerr << "viscoscope: " << e.what() << "\n";
+        return cli::kExitBadInput;
+    } catch (const std::exception& e) {
+        std::cerr << "viscoscope: internal error: " << e.what() << "\n";
+        return cli::kExitInternal;
+    }
+}

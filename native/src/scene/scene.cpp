@@ -1,0 +1,380 @@
+#include "scene/scene.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace viscoscope {
+
+using nlohmann::json;
+
+namespace {
+
+// Reads fields of one JSON object, naming "file: path.to.field" in every error.
+class FieldReader {
+public:
+    FieldReader(const json& object, std::string path) : object_(object), path_(std::move(path)) {
+        if (!object_.is_object()) fail("", "must be an object");
+    }
+
+    [[noreturn]] void fail(const std::string& field, const std::string& problem) const {
+        throw InputError(path_ + (field.empty() ? "" : "." + field) + ": " + problem);
+    }
+    std::string where(const std::string& field) const { return path_ + "." + field; }
+    bool has(const std::string& field) const { return object_.contains(field); }
+    const json& raw(const std::string& field) const {
+        if (!has(field)) fail(field, "missing");
+        return object_.at(field);
+    }
+
+    double number(const std::string& field) const {
+        const json& v = raw(field);
+        if (!v.is_number()) fail(field, "must be a number");
+        const double x = v.get<double>();
+        if (!std::isfinite(x)) fail(field, "must be finite");
+        return x;
+    }
+    double number(const std::string& field, double fallback) const {
+        return has(field) ? number(field) : fallback;
+    }
+    double positive(const std::string& field) const {
+        const double x = number(field);
+        if (!(x > 0)) fail(field, "must be > 0, got " + format(x));
+        return x;
+    }
+    double positive(const std::string& field, double fallback) const {
+        return has(field) ? positive(field) : fallback;
+    }
+    double nonNegative(const std::string& field, double fallback) const {
+        const double x = number(field, fallback);
+        if (x < 0) fail(field, "must be >= 0, got " + format(x));
+        return x;
+    }
+    int integer(const std::string& field, int lo, int hi) const {
+        const json& v = raw(field);
+        if (!v.is_number_integer()) fail(field, "must be an integer");
+        const long long x = v.get<long long>();
+        if (x < lo || x > hi)
+            fail(field, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                            std::to_string(x));
+        return static_cast<int>(x);
+    }
+    int integer(const std::string& field, int lo, int hi, int fallback) const {
+        return has(field) ? integer(field, lo, hi) : fallback;
+    }
+    bool boolean(const std::string& field, bool fallback) const {
+        if (!has(field)) return fallback;
+        if (!raw(field).is_boolean()) fail(field, "must be true or false");
+        return raw(field).get<bool>();
+    }
+    std::string string(const std::string& field) const {
+        const json& v = raw(field);
+        if (!v.is_string()) fail(field, "must be a string");
+        return v.get<std::string>();
+    }
+    Vec3 vec3(const std::string& field) const {
+        const json& v = raw(field);
+        if (!v.is_array() || v.size() != 3) fail(field, "must be an array of 3 numbers");
+        Vec3 out;
+        for (int i = 0; i < 3; ++i) {
+            if (!v[i].is_number()) fail(field, "must be an array of 3 numbers");
+            out[i] = v[i].get<double>();
+            if (!std::isfinite(out[i])) fail(field, "must be finite");
+        }
+        return out;
+    }
+    Vec3 vec3(const std::string& field, const Vec3& fallback) const {
+        return has(field) ? vec3(field) : fallback;
+    }
+    FieldReader child(const std::string& field) const { return FieldReader(raw(field), where(field)); }
+
+    static std::string format(double x) {
+        std::ostringstream s;
+        s << x;
+        return s.str();
+    }
+
+private:
+    const json& object_;
+    std::string path_;
+};
+
+void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
+    if (!(lo.array() < hi.array()).all()) r.fail("max", "must be greater than min on every axis");
+}
+
+Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
+    const std::string type = r.string("type");
+    if (type == "ground") return GroundSolid{r.number("height", 0.0)};
+    if (type == "box") {
+        BoxSolid box{r.vec3("min"), r.vec3("max")};
+        requireOrderedBox(r, box.min, box.max);
+        return box;
+    }
+    if (type == "cup") {
+        CupSolid cup;
+        cup.position = r.vec3("position");
+        cup.innerRadius = r.positive("inner_radius");
+        cup.height = r.positive("height");
+        cup.wallThickness = r.positive("wall_thickness");
+        cup.bottomThickness = r.positive("bottom_thickness");
+        cup.holeRadius = r.nonNegative("hole_radius", 0.0);
+        if (cup.holeRadius >= cup.innerRadius)
+            r.fail("hole_radius", "must be smaller than inner_radius (" +
+                                      FieldReader::format(cup.innerRadius) + "), got " +
+                                      FieldReader::format(cup.holeRadius));
+        return cup;
+    }
+    if (type == "mesh") {
+        std::filesystem::path path = r.string("path");
+        if (path.is_relative()) path = baseDir / path;
+        std::ifstream probe(path);
+        if (!probe) r.fail("path", "cannot read mesh file '" + path.string() + "'");
+        const std::string ext = path.extension().string();
+        if (ext != ".obj" && ext != ".OBJ" && ext != ".ply" && ext != ".PLY")
+            r.fail("path", "mesh must be .obj or .ply, got '" + path.filename().string() + "'");
+        return MeshSolid{path};
+    }
+    r.fail("type", "unknown solid type '" + type + "' (ground, box, cup, mesh)");
+}
+
+LiquidSource parseLiquid(const FieldReader& r, const std::vector<Solid>& solids) {
+    const std::string type = r.string("type");
+    if (type == "box") {
+        LiquidBox box{r.vec3("min"), r.vec3("max")};
+        requireOrderedBox(r, box.min, box.max);
+        return box;
+    }
+    if (type == "cup_fill") {
+        CupFill fill;
+        fill.cup = r.integer("cup", 0, 1 << 20);
+        if (fill.cup >= static_cast<int>(solids.size()) ||
+            !std::holds_alternative<CupSolid>(solids[fill.cup]))
+            r.fail("cup", "must be the index of a solid of type 'cup'");
+        fill.volume = r.positive("volume");
+        const CupSolid& cup = std::get<CupSolid>(solids[fill.cup]);
+        const double capacity = M_PI * cup.innerRadius * cup.innerRadius * cup.height;
+        if (fill.volume > capacity)
+            r.fail("volume", "exceeds the cup's capacity of " + FieldReader::format(capacity) + " m³");
+        return fill;
+    }
+    if (type == "emitter") {
+        DiscEmitter e;
+        e.center = r.vec3("center");
+        e.normal = r.vec3("normal");
+        if (e.normal.norm() < 1e-12) r.fail("normal", "must not be zero");
+        e.normal.normalize();
+        e.radius = r.positive("radius");
+        e.flux = r.positive("flux");
+        e.start = r.nonNegative("start", 0.0);
+        e.end = r.number("end", 1e30);
+        if (e.end <= e.start) r.fail("end", "must be later than start");
+        return e;
+    }
+    r.fail("type", "unknown liquid type '" + type + "' (box, cup_fill, emitter)");
+}
+
+MaterialModel parseModel(const FieldReader& r) {
+    const std::string type = r.string("type");
+    if (type == "newtonian") return Newtonian{};
+    if (type == "power_law") {
+        PowerLaw m{r.positive("consistency"), r.positive("index"), r.positive("eta_min", 1e-3),
+                   r.positive("eta_max", 1e4)};
+        if (m.etaMin >= m.etaMax) r.fail("eta_max", "must be greater than eta_min");
+        return m;
+    }
+    if (type == "carreau")
+        return Carreau{r.nonNegative("eta_infinity", 0.0), r.positive("relaxation_time"),
+                       r.positive("index")};
+    if (type == "herschel_bulkley")
+        return HerschelBulkley{r.nonNegative("yield_stress", 0.0), r.positive("consistency"),
+                               r.positive("index"), r.positive("eta_max", 1e4)};
+    r.fail("type", "unknown material model '" + type +
+                       "' (newtonian, power_law, carreau, herschel_bulkley)");
+}
+
+}  // namespace
+
+double Scene::cellSize() const { return (domain.max - domain.min).maxCoeff() / domain.resolution; }
+
+Eigen::Vector3i Scene::cellCounts() const {
+    const Vec3 extent = (domain.max - domain.min) / cellSize();
+    return extent.array().round().cast<int>().max(1);
+}
+
+Scene parseScene(const json& doc, const std::string& origin, const std::filesystem::path& baseDir) {
+    const FieldReader root(doc, origin);
+    if (root.string("format") != "viscoscope.scene")
+        root.fail("format", "must be \"viscoscope.scene\"");
+    const int version = root.integer("version", 1, 1 << 20);
+    if (version > kSceneFormatVersion)
+        root.fail("version", "is " + std::to_string(version) + ", newer than this engine reads (" +
+                                 std::to_string(kSceneFormatVersion) + ")");
+
+    Scene scene;
+    const FieldReader domain = root.child("domain");
+    scene.domain.min = domain.vec3("min");
+    scene.domain.max = domain.vec3("max");
+    requireOrderedBox(domain, scene.domain.min, scene.domain.max);
+    scene.domain.resolution = domain.integer("resolution", 4, 1024);
+    if (domain.has("periodic")) {
+        const json& p = domain.raw("periodic");
+        if (!p.is_array() || p.size() != 3 || !p[0].is_boolean() || !p[1].is_boolean() ||
+            !p[2].is_boolean())
+            domain.fail("periodic", "must be an array of 3 booleans");
+        for (int i = 0; i < 3; ++i) scene.domain.periodic[i] = p[i].get<bool>();
+    }
+
+    if (root.has("solids")) {
+        const json& solids = root.raw("solids");
+        if (!solids.is_array()) root.fail("solids", "must be an array");
+        for (size_t i = 0; i < solids.size(); ++i)
+            scene.solids.push_back(parseSolid(
+                FieldReader(solids[i], root.where("solids[" + std::to_string(i) + "]")), baseDir));
+    }
+    const json& liquids = root.raw("liquids");
+    if (!liquids.is_array() || liquids.empty())
+        root.fail("liquids", "must be a non-empty array: the scene has no liquid");
+    for (size_t i = 0; i < liquids.size(); ++i)
+        scene.liquids.push_back(parseLiquid(
+            FieldReader(liquids[i], root.where("liquids[" + std::to_string(i) + "]")),
+            scene.solids));
+
+    const FieldReader material = root.child("material");
+    scene.material.density = material.positive("density");
+    scene.material.viscosity = material.positive("viscosity");
+    scene.material.surfaceTension = material.nonNegative("surface_tension", 0.0);
+    scene.material.slipLength = material.nonNegative("slip_length", 0.0);
+    if (material.has("model")) scene.material.model = parseModel(material.child("model"));
+
+    scene.gravity = root.vec3("gravity", scene.gravity);
+    scene.fps = root.positive("fps", 30.0);
+    if (root.has("frames") && root.has("duration"))
+        root.fail("duration", "give either frames or duration, not both");
+    if (root.has("duration"))
+        scene.frames = std::max(1, static_cast<int>(std::lround(root.positive("duration") * scene.fps)));
+    else
+        scene.frames = root.integer("frames", 1, 1000000, 60);
+    scene.seed = static_cast<unsigned>(root.integer("seed", 0, 1 << 30, 1));
+
+    if (root.has("solver")) {
+        const FieldReader s = root.child("solver");
+        if (s.has("scheme")) {
+            const std::string scheme = s.string("scheme");
+            if (scheme == "unified") scene.solver.scheme = StokesScheme::Unified;
+            else if (scheme == "decoupled") scene.solver.scheme = StokesScheme::Decoupled;
+            else s.fail("scheme", "must be \"unified\" or \"decoupled\", got '" + scheme + "'");
+        }
+        scene.solver.tolerance = s.positive("tolerance", scene.solver.tolerance);
+        scene.solver.maxIterations = s.integer("max_iterations", 1, 1000000, scene.solver.maxIterations);
+        scene.solver.cfl = s.positive("cfl", scene.solver.cfl);
+        scene.solver.particlesPerCell = s.integer("particles_per_cell", 1, 64, scene.solver.particlesPerCell);
+        scene.solver.picardIterations = s.integer("picard_iterations", 1, 50, scene.solver.picardIterations);
+    }
+    if (root.has("output")) {
+        const FieldReader o = root.child("output");
+        scene.outputs.particles = o.boolean("particles", scene.outputs.particles);
+        scene.outputs.vdb = o.boolean("vdb", scene.outputs.vdb);
+        scene.outputs.mesh = o.boolean("mesh", scene.outputs.mesh);
+    }
+    return scene;
+}
+
+Scene loadScene(const std::filesystem::path& file) {
+    std::ifstream in(file);
+    if (!in) throw InputError(file.string() + ": cannot open scene file");
+    json doc;
+    try {
+        in >> doc;
+    } catch (const json::parse_error& e) {
+        throw InputError(file.string() + ": not valid JSON (" + e.what() + ")");
+    }
+    Scene scene = parseScene(doc, file.filename().string(), file.parent_path());
+    scene.sourceFile = file;
+    return scene;
+}
+
+namespace {
+json toJson(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
+
+struct SolidWriter {
+    json operator()(const GroundSolid& g) const { return {{"type", "ground"}, {"height", g.height}}; }
+    json operator()(const BoxSolid& b) const {
+        return {{"type", "box"}, {"min", toJson(b.min)}, {"max", toJson(b.max)}};
+    }
+    json operator()(const CupSolid& c) const {
+        return {{"type", "cup"},          {"position", toJson(c.position)},
+                {"inner_radius", c.innerRadius}, {"height", c.height},
+                {"wall_thickness", c.wallThickness}, {"bottom_thickness", c.bottomThickness},
+                {"hole_radius", c.holeRadius}};
+    }
+    json operator()(const MeshSolid& m) const { return {{"type", "mesh"}, {"path", m.path.string()}}; }
+};
+struct LiquidWriter {
+    json operator()(const LiquidBox& b) const {
+        return {{"type", "box"}, {"min", toJson(b.min)}, {"max", toJson(b.max)}};
+    }
+    json operator()(const CupFill& f) const {
+        return {{"type", "cup_fill"}, {"cup", f.cup}, {"volume", f.volume}};
+    }
+    json operator()(const DiscEmitter& e) const {
+        return {{"type", "emitter"}, {"center", toJson(e.center)}, {"normal", toJson(e.normal)},
+                {"radius", e.radius}, {"flux", e.flux}, {"start", e.start}, {"end", e.end}};
+    }
+};
+struct ModelWriter {
+    json operator()(const Newtonian&) const { return {{"type", "newtonian"}}; }
+    json operator()(const PowerLaw& m) const {
+        return {{"type", "power_law"}, {"consistency", m.consistency}, {"index", m.index},
+                {"eta_min", m.etaMin}, {"eta_max", m.etaMax}};
+    }
+    json operator()(const Carreau& m) const {
+        return {{"type", "carreau"}, {"eta_infinity", m.etaInfinity},
+                {"relaxation_time", m.relaxationTime}, {"index", m.index}};
+    }
+    json operator()(const HerschelBulkley& m) const {
+        return {{"type", "herschel_bulkley"}, {"yield_stress", m.yieldStress},
+                {"consistency", m.consistency}, {"index", m.index}, {"eta_max", m.etaMax}};
+    }
+};
+}  // namespace
+
+json sceneToJson(const Scene& s) {
+    json solids = json::array(), liquids = json::array();
+    for (const Solid& solid : s.solids) solids.push_back(std::visit(SolidWriter{}, solid));
+    for (const LiquidSource& liquid : s.liquids) liquids.push_back(std::visit(LiquidWriter{}, liquid));
+    return {
+        {"format", "viscoscope.scene"},
+        {"version", kSceneFormatVersion},
+        {"domain",
+         {{"min", toJson(s.domain.min)},
+          {"max", toJson(s.domain.max)},
+          {"resolution", s.domain.resolution},
+          {"periodic", s.domain.periodic}}},
+        {"solids", solids},
+        {"liquids", liquids},
+        {"material",
+         {{"density", s.material.density},
+          {"viscosity", s.material.viscosity},
+          {"surface_tension", s.material.surfaceTension},
+          {"slip_length", s.material.slipLength},
+          {"model", std::visit(ModelWriter{}, s.material.model)}}},
+        {"gravity", toJson(s.gravity)},
+        {"fps", s.fps},
+        {"frames", s.frames},
+        {"seed", s.seed},
+        {"solver",
+         {{"scheme", s.solver.scheme == StokesScheme::Unified ? "unified" : "decoupled"},
+          {"tolerance", s.solver.tolerance},
+          {"max_iterations", s.solver.maxIterations},
+          {"cfl", s.solver.cfl},
+          {"particles_per_cell", s.solver.particlesPerCell},
+          {"picard_iterations", s.solver.picardIterations}}},
+        {"output",
+         {{"particles", s.outputs.particles}, {"vdb", s.outputs.vdb}, {"mesh", s.outputs.mesh}}},
+    };
+}
+
+}  // namespace viscoscope

@@ -1,0 +1,137 @@
+// The scene file: what is simulated. Versioned JSON in SI units (m, s, kg, Pa·s).
+// `loadScene` validates every field and throws InputError naming the field and the problem,
+// so no stage downstream ever sees a silently defaulted or non-physical value.
+#pragma once
+
+#include <Eigen/Core>
+#include <nlohmann/json_fwd.hpp>
+
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace viscoscope {
+
+// Bad input from the user (a file, a field, a value). The CLI maps it to exit code 2.
+class InputError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+using Vec3 = Eigen::Vector3d;
+
+inline constexpr int kSceneFormatVersion = 1;
+
+struct Domain {
+    Vec3 min{0, 0, 0};
+    Vec3 max{1, 1, 1};
+    int resolution = 32;  // cells along the longest axis; cells are cubes
+    std::array<bool, 3> periodic{false, false, false};
+};
+
+// Solids. Each becomes a signed distance (negative inside) in the simulation.
+struct GroundSolid {
+    double height = 0;  // the plane z = height; solid below
+};
+struct BoxSolid {
+    Vec3 min, max;
+};
+// A cylindrical cup standing on its outer bottom face, axis along +z, with a round hole
+// through the centre of its bottom. `position` is the centre of the outer bottom face.
+struct CupSolid {
+    Vec3 position{0, 0, 0};
+    double innerRadius = 0.043;
+    double height = 0.06;  // inner depth, from the inner bottom face to the rim
+    double wallThickness = 0.003;
+    double bottomThickness = 0.004;
+    double holeRadius = 0.009;
+};
+struct MeshSolid {
+    std::filesystem::path path;  // OBJ or PLY, resolved against the scene file's folder
+};
+using Solid = std::variant<GroundSolid, BoxSolid, CupSolid, MeshSolid>;
+
+// Liquid sources.
+struct LiquidBox {
+    Vec3 min, max;
+};
+// Fill the cup solid with index `cup` in `solids` with `volume` m³ of liquid (hole included).
+struct CupFill {
+    int cup = 0;
+    double volume = 1.7e-4;
+};
+// A disc that emits liquid along its normal at a constant volume flux (m³/s) between start and end.
+struct DiscEmitter {
+    Vec3 center, normal{0, 0, -1};
+    double radius = 0.005;
+    double flux = 1e-6;
+    double start = 0, end = 1e30;
+};
+using LiquidSource = std::variant<LiquidBox, CupFill, DiscEmitter>;
+
+// Rheology. η(γ̇) for generalized Newtonian models, evaluated per stress sample.
+struct Newtonian {};
+struct PowerLaw {  // η = K γ̇^(n-1), clamped to [etaMin, etaMax]
+    double consistency = 1, index = 1, etaMin = 1e-3, etaMax = 1e4;
+};
+struct Carreau {  // η = η∞ + (η0 − η∞)(1 + (λγ̇)²)^((n−1)/2); η0 is Material::viscosity
+    double etaInfinity = 0, relaxationTime = 1, index = 1;
+};
+struct HerschelBulkley {  // η = (τy + K γ̇^n)/γ̇, regularized by Papanastasiou-style cap etaMax
+    double yieldStress = 0, consistency = 1, index = 1, etaMax = 1e4;
+};
+using MaterialModel = std::variant<Newtonian, PowerLaw, Carreau, HerschelBulkley>;
+
+struct Material {
+    double density = 1400;         // ρ, kg/m³
+    double viscosity = 8;          // η, Pa·s (zero-shear viscosity for shear-dependent models)
+    double surfaceTension = 0;     // σ, N/m
+    double slipLength = 0;         // Navier slip length at solid walls, m (0 = no-slip)
+    MaterialModel model = Newtonian{};
+};
+
+enum class StokesScheme { Unified, Decoupled };
+
+struct SolverSettings {
+    StokesScheme scheme = StokesScheme::Unified;
+    double tolerance = 1e-4;      // relative residual of the Stokes solve
+    int maxIterations = 2000;
+    double cfl = 1.0;             // cells a particle may cross per step
+    int particlesPerCell = 8;
+    int picardIterations = 3;     // for shear-dependent models only
+};
+
+struct Outputs {
+    bool particles = true;
+    bool vdb = true;
+    bool mesh = false;
+};
+
+struct Scene {
+    std::filesystem::path sourceFile;
+    Domain domain;
+    std::vector<Solid> solids;
+    std::vector<LiquidSource> liquids;
+    Material material;
+    Vec3 gravity{0, 0, -9.81};
+    double fps = 30;
+    int frames = 60;
+    unsigned seed = 1;
+    SolverSettings solver;
+    Outputs outputs;
+
+    double cellSize() const;
+    Eigen::Vector3i cellCounts() const;
+};
+
+// Parses and validates. Throws InputError("scene.json: material.viscosity: must be > 0, got -1").
+Scene parseScene(const nlohmann::json& doc, const std::string& origin,
+                 const std::filesystem::path& baseDir = {});
+Scene loadScene(const std::filesystem::path& file);
+nlohmann::json sceneToJson(const Scene& scene);
+
+}  // namespace viscoscope

@@ -1,0 +1,119 @@
+// The MAC grid: cell-centred, face-centred and edge-centred sample lattices over one box.
+// Every sample kind is a Lattice with a per-axis offset of 0 (on a grid plane) or ½ (between planes);
+// a periodic axis wraps and has no extra plane. Internal to the sim stage.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cmath>
+#include <vector>
+
+namespace viscoscope::sim {
+
+using Vec3 = Eigen::Vector3d;
+using Vec3i = Eigen::Vector3i;
+
+// Where the samples of one kind sit inside a cell: 1 = cell-centred along that axis, 0 = on a face.
+using Stagger = std::array<int, 3>;
+inline constexpr Stagger kCellCentre{1, 1, 1};
+inline constexpr std::array<Stagger, 3> kFace{{{0, 1, 1}, {1, 0, 1}, {1, 1, 0}}};
+// Off-diagonal stress τ_ab lives on the edges parallel to the third axis c: τ_yz on x-edges, etc.
+inline constexpr std::array<Stagger, 3> kEdge{{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+
+struct Lattice {
+    Vec3i size{0, 0, 0};
+    Stagger stagger{1, 1, 1};
+    std::array<bool, 3> periodic{false, false, false};
+
+    Lattice() = default;
+    Lattice(const Vec3i& cells, Stagger s, std::array<bool, 3> wrap) : stagger(s), periodic(wrap) {
+        for (int a = 0; a < 3; ++a) size[a] = cells[a] + ((s[a] == 0 && !wrap[a]) ? 1 : 0);
+    }
+    int count() const { return size[0] * size[1] * size[2]; }
+    int index(int i, int j, int k) const { return i + size[0] * (j + size[1] * k); }
+    Vec3i coords(int idx) const {
+        return {idx % size[0], (idx / size[0]) % size[1], idx / (size[0] * size[1])};
+    }
+    // Wraps periodic axes; returns false when (i,j,k) lies outside a non-periodic axis.
+    bool resolve(Vec3i& c) const {
+        for (int a = 0; a < 3; ++a) {
+            if (periodic[a]) c[a] = ((c[a] % size[a]) + size[a]) % size[a];
+            else if (c[a] < 0 || c[a] >= size[a]) return false;
+        }
+        return true;
+    }
+    // Index of a neighbour, or -1 outside the domain.
+    int neighbour(const Vec3i& c, int axis, int delta) const {
+        Vec3i n = c;
+        n[axis] += delta;
+        return resolve(n) ? index(n[0], n[1], n[2]) : -1;
+    }
+};
+
+struct Grid {
+    Vec3 origin{0, 0, 0};
+    double dx = 1;
+    Vec3i cells{1, 1, 1};
+    std::array<bool, 3> periodic{false, false, false};
+
+    Lattice lattice(const Stagger& s) const { return Lattice(cells, s, periodic); }
+    // World position of sample (i,j,k) of a lattice with stagger s.
+    Vec3 position(const Stagger& s, const Vec3i& c) const {
+        return origin + dx * Vec3(c[0] + 0.5 * s[0], c[1] + 0.5 * s[1], c[2] + 0.5 * s[2]);
+    }
+    Vec3 extent() const { return dx * cells.cast<double>(); }
+};
+
+// A scalar field on one lattice.
+struct Field {
+    Lattice lattice;
+    std::vector<double> values;
+
+    Field() = default;
+    explicit Field(const Lattice& l, double fill = 0) : lattice(l), values(l.count(), fill) {}
+    double& operator[](int i) { return values[i]; }
+    double operator[](int i) const { return values[i]; }
+};
+
+// Trilinear interpolation weights of point x on lattice s: the lower corner and fractions.
+inline void interpolationStencil(const Grid& g, const Stagger& s, const Vec3& x, Vec3i& base,
+                                 Vec3& frac) {
+    const Vec3 local = (x - g.origin) / g.dx;
+    for (int a = 0; a < 3; ++a) {
+        const double u = local[a] - 0.5 * s[a];
+        const double f = std::floor(u);
+        base[a] = static_cast<int>(f);
+        frac[a] = u - f;
+    }
+}
+
+// Calls visit(index, weight, weightGradient) for the 8 lattice samples around x that exist.
+template <class Visit>
+void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&& visit) {
+    Vec3i base;
+    Vec3 f;
+    interpolationStencil(g, l.stagger, x, base, f);
+    for (int dk = 0; dk < 2; ++dk)
+        for (int dj = 0; dj < 2; ++dj)
+            for (int di = 0; di < 2; ++di) {
+                Vec3i c = base + Vec3i(di, dj, dk);
+                if (!l.resolve(c)) continue;
+                const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1],
+                             wz = dk ? f[2] : 1 - f[2];
+                const Vec3 grad = Vec3((di ? 1 : -1) * wy * wz, (dj ? 1 : -1) * wx * wz,
+                                       (dk ? 1 : -1) * wx * wy) / g.dx;
+                visit(l.index(c[0], c[1], c[2]), wx * wy * wz, grad);
+            }
+}
+
+inline double interpolate(const Grid& g, const Field& field, const Vec3& x) {
+    double sum = 0, weight = 0;
+    forEachStencilSample(g, field.lattice, x, [&](int i, double w, const Vec3&) {
+        sum += w * field[i];
+        weight += w;
+    });
+    return weight > 0 ? sum / weight : 0;
+}
+
+}  // namespace viscoscope::sim

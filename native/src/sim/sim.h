@@ -1,0 +1,102 @@
+// The forward model: a viscous free-surface liquid simulated with APIC particles on a MAC grid.
+// Each step: particles → grid (APIC) → body forces and surface tension → implicit pressure and
+// viscosity (StokesSolver or DecoupledViscositySolver) → grid → particles → RK3 advection.
+// This is the stage's public header; everything else in sim/ is internal.
+#pragma once
+
+#include "scene/scene.h"
+#include "sim/grid.h"
+#include "sim/stokes_solver.h"
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <random>
+#include <vector>
+
+namespace viscoscope::sim {
+
+class SolidField;
+class MaterialLaw;
+
+struct Particles {
+    std::vector<Vec3> position;
+    std::vector<Vec3> velocity;
+    std::vector<Eigen::Matrix3d> affine;  // APIC C_p: row a is the gradient of velocity component a
+};
+
+struct StepStats {
+    double dt = 0;
+    SolveStats solve;
+    double transferSeconds = 0, solveSeconds = 0, otherSeconds = 0;
+};
+
+struct FrameStats {
+    int frame = 0;
+    int steps = 0;
+    int solverIterations = 0;
+    double simulatedTime = 0;
+    double liquidVolume = 0;  // m³, from the cell volume fractions
+    double maxSpeed = 0;      // m/s over particles
+    double transferSeconds = 0, solveSeconds = 0, otherSeconds = 0;
+    bool converged = true;
+};
+
+class Simulation {
+public:
+    explicit Simulation(const Scene& scene);
+    ~Simulation();
+    Simulation(const Simulation&) = delete;
+    Simulation& operator=(const Simulation&) = delete;
+
+    // Advances to the end of the next output frame. Throws std::runtime_error if the state becomes
+    // non-finite (which a stable solver must never do; tests check it).
+    FrameStats advanceFrame();
+    StepStats step(double dt);  // one step of exactly dt (tests use it directly)
+    double stableTimeStep() const;
+
+    const Scene& scene() const { return scene_; }
+    const Grid& grid() const { return grid_; }
+    const Particles& particles() const { return particles_; }
+    const StokesState& fields() const { return state_; }  // velocity on faces, pressure at cells
+    const VolumeFractions& fractions() const { return fractions_; }
+    double time() const { return time_; }
+    int frame() const { return frame_; }
+    double liquidVolume() const;
+    Vec3 velocityAt(const Vec3& x) const;  // trilinear on the staggered grid
+    double solidDistance(const Vec3& x) const;
+
+private:
+    void seedParticles();
+    void emit(double dt);
+    void transferToGrid();
+    void computeFractions();
+    void extrapolateVelocity(int layers);
+    void applyBodyForces(double dt);
+    void applySurfaceTension(double dt);
+    void updateViscosity();
+    void transferToParticles();
+    void advectParticles(double dt);
+
+    Scene scene_;
+    Grid grid_;
+    std::unique_ptr<SolidField> solids_;
+    std::unique_ptr<MaterialLaw> material_;
+    std::unique_ptr<PressureViscositySolver> solver_;
+    Particles particles_;
+    StokesState state_;
+    VolumeFractions fractions_;
+    Field liquidPhi_;                 // signed distance to the liquid surface at cell centres
+    std::array<std::vector<char>, 3> validFace_;  // faces whose velocity came from particles or the solve
+    Field cellViscosity_;
+    std::array<Field, 3> edgeViscosity_;
+    std::vector<double> fineSolidFraction_;  // non-solid fraction of each half-cell, fixed in time
+    std::vector<double> cellSolidDistance_;  // solid signed distance at cell centres
+    double time_ = 0;
+    int frame_ = 0;
+    double particleVolume_ = 0;
+    double emitterDebt_ = 0;
+    std::mt19937_64 random_;
+};
+
+}  // namespace viscoscope::sim

@@ -1,0 +1,579 @@
+#include "sim/sim.h"
+
+#include "sim/material_model.h"
+#include "sim/solid_field.h"
+
+#include <Eigen/Geometry>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+namespace viscoscope::sim {
+
+namespace {
+
+// Particles are spheres of this radius (in cells) when the liquid's distance field is built from
+// them; with 8 particles per cell it closes the gaps between neighbours in the bulk.
+constexpr double kParticleRadius = 0.6;
+// Particles are kept this far (in cells) outside solids after advection.
+constexpr double kSolidMargin = 0.05;
+
+using Clock = std::chrono::steady_clock;
+double secondsSince(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Smooth Heaviside of a signed distance over a half-cell of width h: the inside fraction of a
+// half-cell whose centre is at distance phi from a planar interface.
+double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
+
+bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
+    if (const auto* box = std::get_if<LiquidBox>(&source))
+        return (x.array() >= box->min.array()).all() && (x.array() <= box->max.array()).all();
+    if (const auto* fill = std::get_if<CupFill>(&source)) {
+        const CupSolid& cup = std::get<CupSolid>(solids[fill->cup]);
+        const double r = std::hypot(x.x() - cup.position.x(), x.y() - cup.position.y());
+        const double zInner = cup.position.z() + cup.bottomThickness;
+        const double level = fill->volume / (M_PI * cup.innerRadius * cup.innerRadius);
+        const bool inCavity = r < cup.innerRadius && x.z() >= zInner && x.z() <= zInner + level;
+        const bool inHole = r < cup.holeRadius && x.z() >= cup.position.z() && x.z() < zInner;
+        return inCavity || inHole;
+    }
+    return false;  // emitters add liquid over time, not at the start
+}
+
+}  // namespace
+
+Simulation::Simulation(const Scene& scene)
+    : scene_(scene), random_(scene.seed) {
+    grid_.origin = scene.domain.min;
+    grid_.dx = scene.cellSize();
+    grid_.cells = scene.cellCounts();
+    grid_.periodic = scene.domain.periodic;
+    solids_ = std::make_unique<SolidField>(scene.solids, grid_);
+    material_ = std::make_unique<MaterialLaw>(scene.material);
+    solver_ = makeSolver(scene.solver.scheme == StokesScheme::Unified);
+
+    const Lattice cells = grid_.lattice(kCellCentre);
+    state_.pressure = Field(cells);
+    liquidPhi_ = Field(cells);
+    cellViscosity_ = Field(cells, scene.material.viscosity);
+    fractions_.cell = Field(cells);
+    for (int a = 0; a < 3; ++a) {
+        state_.velocity[a] = Field(grid_.lattice(kFace[a]));
+        state_.normalStress[a] = Field(cells);
+        state_.shearStress[a] = Field(grid_.lattice(kEdge[a]));
+        edgeViscosity_[a] = Field(grid_.lattice(kEdge[a]), scene.material.viscosity);
+        fractions_.face[a] = Field(grid_.lattice(kFace[a]));
+        fractions_.edge[a] = Field(grid_.lattice(kEdge[a]));
+        const Lattice& faces = fractions_.face[a].lattice;
+        fractions_.solidFace[a].resize(faces.count());
+        validFace_[a].assign(faces.count(), 0);
+        for (int f = 0; f < faces.count(); ++f)
+            fractions_.solidFace[a][f] =
+                solids_->distance(grid_.position(kFace[a], faces.coords(f))) <= 0;
+    }
+    cellSolidDistance_.resize(cells.count());
+    for (int c = 0; c < cells.count(); ++c)
+        cellSolidDistance_[c] = solids_->distance(grid_.position(kCellCentre, cells.coords(c)));
+
+    // Non-solid fraction of every half-cell: the one sub-cell sampling all control volumes share.
+    const Vec3i fine = 2 * grid_.cells;
+    const double h = 0.5 * grid_.dx;
+    fineSolidFraction_.resize(size_t(fine[0]) * fine[1] * fine[2]);
+    tbb::parallel_for(0, fine[2], [&](int k) {
+        for (int j = 0; j < fine[1]; ++j)
+            for (int i = 0; i < fine[0]; ++i) {
+                const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
+                fineSolidFraction_[i + fine[0] * (j + size_t(fine[1]) * k)] =
+                    1.0 - insideFraction(solids_->distance(x), h);
+            }
+    });
+
+    seedParticles();
+    if (particles_.position.empty() &&
+        std::none_of(scene.liquids.begin(), scene.liquids.end(),
+                     [](const LiquidSource& s) { return std::holds_alternative<DiscEmitter>(s); }))
+        throw InputError(scene.sourceFile.filename().string() +
+                         ": liquids: the liquid sources hold no liquid outside the solids");
+    computeFractions();
+}
+
+Simulation::~Simulation() = default;
+
+double Simulation::solidDistance(const Vec3& x) const { return solids_->distance(x); }
+
+void Simulation::seedParticles() {
+    const int perCell = scene_.solver.particlesPerCell;
+    const int perAxis = static_cast<int>(std::round(std::cbrt(perCell)));
+    const bool stratified = perAxis * perAxis * perAxis == perCell;
+    particleVolume_ = std::pow(grid_.dx, 3) / perCell;
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const Lattice cells = grid_.lattice(kCellCentre);
+    for (int c = 0; c < cells.count(); ++c) {
+        const Vec3i ijk = cells.coords(c);
+        for (int s = 0; s < perCell; ++s) {
+            // Jittered stratified seeding: one particle per sub-cell, at a random point in it.
+            Vec3 sub(unit(random_), unit(random_), unit(random_));
+            if (stratified) sub = (sub + Vec3(s % perAxis, (s / perAxis) % perAxis, s / (perAxis * perAxis))) / perAxis;
+            const Vec3 x = grid_.origin + grid_.dx * (ijk.cast<double>() + sub);
+            if (solids_->distance(x) <= kSolidMargin * grid_.dx) continue;
+            const bool liquid = std::any_of(scene_.liquids.begin(), scene_.liquids.end(),
+                                            [&](const LiquidSource& src) { return insideSource(src, scene_.solids, x); });
+            if (!liquid) continue;
+            particles_.position.push_back(x);
+            particles_.velocity.push_back(Vec3::Zero());
+            particles_.affine.push_back(Eigen::Matrix3d::Zero());
+        }
+    }
+}
+
+void Simulation::emit(double dt) {
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    for (const LiquidSource& source : scene_.liquids) {
+        const auto* e = std::get_if<DiscEmitter>(&source);
+        if (!e || time_ + dt <= e->start || time_ >= e->end) continue;
+        const double active = std::min(time_ + dt, e->end) - std::max(time_, e->start);
+        const double speed = e->flux / (M_PI * e->radius * e->radius);
+        emitterDebt_ += e->flux * active;
+        // An orthonormal frame on the disc.
+        const Vec3 t1 = e->normal.unitOrthogonal(), t2 = e->normal.cross(t1);
+        for (; emitterDebt_ >= particleVolume_; emitterDebt_ -= particleVolume_) {
+            const double r = e->radius * std::sqrt(unit(random_)), theta = 2 * M_PI * unit(random_);
+            const Vec3 x = e->center + r * (std::cos(theta) * t1 + std::sin(theta) * t2) +
+                           e->normal * (speed * active * unit(random_));
+            if (solids_->distance(x) <= 0) continue;
+            particles_.position.push_back(x);
+            particles_.velocity.push_back(speed * e->normal);
+            particles_.affine.push_back(Eigen::Matrix3d::Zero());
+        }
+    }
+}
+
+// APIC particle → grid transfer (Jiang et al. 2015) with trilinear weights on each face lattice.
+void Simulation::transferToGrid() {
+    const size_t n = particles_.position.size();
+    for (int a = 0; a < 3; ++a) {
+        Field& u = state_.velocity[a];
+        std::vector<double> weight(u.values.size(), 0.0);
+        std::fill(u.values.begin(), u.values.end(), 0.0);
+        for (size_t p = 0; p < n; ++p) {
+            const Vec3& x = particles_.position[p];
+            const double vp = particles_.velocity[p][a];
+            const Eigen::RowVector3d cp = particles_.affine[p].row(a);
+            forEachStencilSample(grid_, u.lattice, x, [&](int f, double w, const Vec3&) {
+                const Vec3 offset = grid_.position(kFace[a], u.lattice.coords(f)) - x;
+                u[f] += w * (vp + cp * offset);
+                weight[f] += w;
+            });
+        }
+        for (size_t f = 0; f < weight.size(); ++f) {
+            validFace_[a][f] = weight[f] > 1e-12 && !fractions_.solidFace[a][f];
+            u[f] = validFace_[a][f] ? u[f] / weight[f] : 0.0;
+        }
+    }
+}
+
+void Simulation::computeFractions() {
+    const Lattice& cells = liquidPhi_.lattice;
+    const double dx = grid_.dx, radius = kParticleRadius * dx;
+    std::fill(liquidPhi_.values.begin(), liquidPhi_.values.end(), 3 * dx);
+    for (const Vec3& x : particles_.position) {
+        const Vec3i base = ((x - grid_.origin) / dx).array().floor().cast<int>();
+        for (int dk = -1; dk <= 1; ++dk)
+            for (int dj = -1; dj <= 1; ++dj)
+                for (int di = -1; di <= 1; ++di) {
+                    Vec3i c = base + Vec3i(di, dj, dk);
+                    if (!cells.resolve(c)) continue;
+                    const int idx = cells.index(c[0], c[1], c[2]);
+                    const double d = (grid_.position(kCellCentre, c) - x).norm() - radius;
+                    liquidPhi_[idx] = std::min(liquidPhi_[idx], d);
+                }
+    }
+    // Extend the liquid one cell into solids so that cut cells at walls read as full of liquid;
+    // the non-solid fraction then removes the part inside the wall.
+    Field extended = liquidPhi_;
+    for (int c = 0; c < cells.count(); ++c) {
+        if (cellSolidDistance_[c] >= 0) continue;
+        const Vec3i ijk = cells.coords(c);
+        for (int a = 0; a < 3; ++a)
+            for (int d : {-1, 1})
+                if (const int nb = cells.neighbour(ijk, a, d); nb >= 0 && cellSolidDistance_[nb] >= 0)
+                    extended[c] = std::min(extended[c], liquidPhi_[nb]);
+    }
+    liquidPhi_ = std::move(extended);
+
+    // Liquid × non-solid fraction of every half-cell.
+    const Vec3i fine = 2 * grid_.cells;
+    const double h = 0.5 * dx;
+    std::vector<double> fineFraction(fineSolidFraction_.size());
+    tbb::parallel_for(0, fine[2], [&](int k) {
+        for (int j = 0; j < fine[1]; ++j)
+            for (int i = 0; i < fine[0]; ++i) {
+                const size_t idx = i + fine[0] * (j + size_t(fine[1]) * k);
+                if (fineSolidFraction_[idx] == 0) {
+                    fineFraction[idx] = 0;
+                    continue;
+                }
+                const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
+                fineFraction[idx] = fineSolidFraction_[idx] * insideFraction(interpolate(grid_, liquidPhi_, x), h);
+            }
+    });
+
+    // A sample's control volume is the cell-sized box around it: 2×2×2 half-cells.
+    auto average = [&](Field& out, const Stagger& s) {
+        const Lattice& l = out.lattice;
+        tbb::parallel_for(0, l.count(), [&](int idx) {
+            const Vec3i c = l.coords(idx);
+            double sum = 0;
+            for (int dk = 0; dk < 2; ++dk)
+                for (int dj = 0; dj < 2; ++dj)
+                    for (int di = 0; di < 2; ++di) {
+                        Vec3i f(2 * c[0] + s[0] - 1 + di, 2 * c[1] + s[1] - 1 + dj, 2 * c[2] + s[2] - 1 + dk);
+                        bool inside = true;
+                        for (int a = 0; a < 3; ++a) {
+                            if (grid_.periodic[a]) f[a] = (f[a] % fine[a] + fine[a]) % fine[a];
+                            else inside = inside && f[a] >= 0 && f[a] < fine[a];
+                        }
+                        if (inside) sum += fineFraction[f[0] + fine[0] * (f[1] + size_t(fine[1]) * f[2])];
+                    }
+            out[idx] = sum / 8;
+        });
+    };
+    average(fractions_.cell, kCellCentre);
+    for (int a = 0; a < 3; ++a) {
+        average(fractions_.face[a], kFace[a]);
+        average(fractions_.edge[a], kEdge[a]);
+    }
+}
+
+// Fills faces without a valid velocity with the mean of valid neighbours, one layer per pass.
+void Simulation::extrapolateVelocity(int layers) {
+    for (int a = 0; a < 3; ++a) {
+        Field& u = state_.velocity[a];
+        std::vector<char>& valid = validFace_[a];
+        for (int layer = 0; layer < layers; ++layer) {
+            std::vector<char> next = valid;
+            std::vector<double> values = u.values;
+            for (int f = 0; f < u.lattice.count(); ++f) {
+                if (valid[f] || fractions_.solidFace[a][f]) continue;
+                const Vec3i c = u.lattice.coords(f);
+                double sum = 0;
+                int count = 0;
+                for (int b = 0; b < 3; ++b)
+                    for (int d : {-1, 1})
+                        if (const int nb = u.lattice.neighbour(c, b, d); nb >= 0 && valid[nb]) {
+                            sum += u[nb];
+                            ++count;
+                        }
+                if (count) {
+                    values[f] = sum / count;
+                    next[f] = 1;
+                }
+            }
+            u.values = std::move(values);
+            valid = std::move(next);
+        }
+    }
+}
+
+void Simulation::applyBodyForces(double dt) {
+    for (int a = 0; a < 3; ++a)
+        for (int f = 0; f < state_.velocity[a].lattice.count(); ++f)
+            if (!fractions_.solidFace[a][f]) state_.velocity[a][f] += dt * scene_.gravity[a];
+}
+
+// Ghost-fluid surface tension in volume-fraction form: outside the liquid the pressure is the
+// Laplace pressure σκ, so the total pressure seen by a face is W p + (1 − W) σκ; its known part
+// (1 − W) σκ is applied here as a force before the solve.
+void Simulation::applySurfaceTension(double dt) {
+    const double sigma = scene_.material.surfaceTension;
+    if (sigma <= 0) return;
+    const Lattice& cells = liquidPhi_.lattice;
+    const double dx = grid_.dx;
+    // Smooth the particle-built distance (a union of spheres) before differentiating it twice.
+    Field phi = liquidPhi_;
+    for (int pass = 0; pass < 2; ++pass) {
+        Field smoothed = phi;
+        for (int c = 0; c < cells.count(); ++c) {
+            const Vec3i ijk = cells.coords(c);
+            double sum = phi[c] * 2;
+            int count = 2;
+            for (int a = 0; a < 3; ++a)
+                for (int d : {-1, 1})
+                    if (const int nb = cells.neighbour(ijk, a, d); nb >= 0) {
+                        sum += phi[nb];
+                        ++count;
+                    }
+            smoothed[c] = sum / count;
+        }
+        phi = std::move(smoothed);
+    }
+    auto value = [&](Vec3i c) { return cells.resolve(c) ? phi[cells.index(c[0], c[1], c[2])] : 3 * dx; };
+    Field pressureOutside(cells);
+    for (int c = 0; c < cells.count(); ++c) {
+        if (std::abs(phi[c]) > 2 * dx || fractions_.cell[c] >= 1) continue;
+        const Vec3i ijk = cells.coords(c);
+        // κ = ∇·(∇φ/|∇φ|), differenced over the six half-cell faces.
+        double kappa = 0;
+        for (int a = 0; a < 3; ++a)
+            for (int d : {-1, 1}) {
+                const Vec3i nb = ijk + d * Vec3i::Unit(a);
+                Vec3 grad;
+                for (int b = 0; b < 3; ++b) {
+                    if (b == a) {
+                        grad[b] = d * (value(nb) - value(ijk)) / dx;
+                    } else {
+                        const Vec3i e = Vec3i::Unit(b);
+                        grad[b] = (value(ijk + e) - value(ijk - e) + value(nb + e) - value(nb - e)) / (4 * dx);
+                    }
+                }
+                const double len = grad.norm();
+                if (len > 1e-12) kappa += grad[a] / len / dx;
+            }
+        kappa = std::clamp(kappa, -2 / dx, 2 / dx);  // no more curved than the grid resolves
+        pressureOutside[c] = (1 - fractions_.cell[c]) * sigma * kappa;
+    }
+    for (int a = 0; a < 3; ++a) {
+        Field& u = state_.velocity[a];
+        for (int f = 0; f < u.lattice.count(); ++f) {
+            if (fractions_.solidFace[a][f]) continue;
+            const Vec3i c = u.lattice.coords(f);
+            const int lo = cells.neighbour(c, a, -1);
+            Vec3i hiC = c;
+            const int hi = cells.resolve(hiC) ? cells.index(hiC[0], hiC[1], hiC[2]) : -1;
+            if (lo < 0 || hi < 0) continue;
+            if (fractions_.cell[lo] < kMinWeight && fractions_.cell[hi] < kMinWeight) continue;
+            const double mass = scene_.material.density * std::max(fractions_.face[a][f], kMinMassFraction);
+            u[f] -= dt * (pressureOutside[hi] - pressureOutside[lo]) / (dx * mass);
+        }
+    }
+}
+
+// Per-sample viscosity: the material law at the local shear rate, reduced at walls by the
+// Navier slip length (a wall stress sample sees η·(Δx/2)/(Δx/2 + λ): λ = 0 is no-slip).
+void Simulation::updateViscosity() {
+    const double eta0 = scene_.material.viscosity;
+    const Lattice& cells = cellViscosity_.lattice;
+    const double dx = grid_.dx;
+    if (material_->shearDependent()) {
+        for (int c = 0; c < cells.count(); ++c) {
+            if (fractions_.cell[c] < kMinWeight) {
+                cellViscosity_[c] = eta0;
+                continue;
+            }
+            const Vec3i ijk = cells.coords(c);
+            const Vec3 x = grid_.position(kCellCentre, ijk);
+            Eigen::Matrix3d grad;
+            for (int a = 0; a < 3; ++a)
+                for (int b = 0; b < 3; ++b) {
+                    const Vec3 e = 0.5 * dx * Vec3::Unit(b);
+                    grad(a, b) = (interpolate(grid_, state_.velocity[a], x + e) -
+                                  interpolate(grid_, state_.velocity[a], x - e)) / dx;
+                }
+            const Eigen::Matrix3d strain = 0.5 * (grad + grad.transpose());
+            cellViscosity_[c] = material_->viscosity(std::sqrt(2 * strain.squaredNorm()));
+        }
+    }
+    const double slip = scene_.material.slipLength;
+    for (int e = 0; e < 3; ++e) {
+        Field& eta = edgeViscosity_[e];
+        const int a = (e + 1) % 3, b = (e + 2) % 3;
+        for (int s = 0; s < eta.lattice.count(); ++s) {
+            const Vec3i ijk = eta.lattice.coords(s);
+            if (material_->shearDependent()) {  // mean of the four cells around the edge
+                double sum = 0;
+                int count = 0;
+                for (int da = -1; da <= 0; ++da)
+                    for (int db = -1; db <= 0; ++db) {
+                        Vec3i c = ijk + da * Vec3i::Unit(a) + db * Vec3i::Unit(b);
+                        if (cells.resolve(c)) {
+                            sum += cellViscosity_[cells.index(c[0], c[1], c[2])];
+                            ++count;
+                        }
+                    }
+                eta[s] = count ? sum / count : eta0;
+            } else {
+                eta[s] = eta0;
+            }
+            if (slip > 0 && fractions_.edge[e][s] >= kMinWeight) {
+                bool wall = false;
+                for (int axis : {a, b}) {
+                    const Lattice& faces = fractions_.face[axis].lattice;
+                    const int other = axis == a ? b : a;
+                    for (int d : {-1, 0}) {
+                        Vec3i f = ijk + d * Vec3i::Unit(other);
+                        wall = wall || !faces.resolve(f) || fractions_.solidFace[axis][faces.index(f[0], f[1], f[2])];
+                    }
+                }
+                if (wall) eta[s] *= 0.5 * dx / (0.5 * dx + slip);
+            }
+        }
+    }
+}
+
+// APIC grid → particle transfer: velocity and the affine matrix from the weight gradients.
+void Simulation::transferToParticles() {
+    const size_t n = particles_.position.size();
+    tbb::parallel_for(size_t(0), n, [&](size_t p) {
+        const Vec3& x = particles_.position[p];
+        for (int a = 0; a < 3; ++a) {
+            const Field& u = state_.velocity[a];
+            double v = 0, wsum = 0;
+            Vec3 grad = Vec3::Zero();
+            forEachStencilSample(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw) {
+                v += w * u[f];
+                wsum += w;
+                grad += dw * u[f];
+            });
+            particles_.velocity[p][a] = wsum > 0 ? v / wsum : 0;
+            particles_.affine[p].row(a) = grad.transpose();
+        }
+    });
+}
+
+Vec3 Simulation::velocityAt(const Vec3& x) const {
+    return {interpolate(grid_, state_.velocity[0], x), interpolate(grid_, state_.velocity[1], x),
+            interpolate(grid_, state_.velocity[2], x)};
+}
+
+// Ralston's third-order Runge–Kutta through the grid velocity, then out of solids.
+void Simulation::advectParticles(double dt) {
+    const Vec3 lo = grid_.origin, extent = grid_.extent();
+    tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
+        Vec3 x = particles_.position[p];
+        const Vec3 k1 = velocityAt(x);
+        const Vec3 k2 = velocityAt(x + 0.5 * dt * k1);
+        const Vec3 k3 = velocityAt(x + 0.75 * dt * k2);
+        x += dt * (2.0 / 9.0 * k1 + 1.0 / 3.0 * k2 + 4.0 / 9.0 * k3);
+        const double margin = kSolidMargin * grid_.dx;
+        for (int iter = 0; iter < 3; ++iter) {
+            const double d = solids_->distance(x);
+            if (d >= margin) break;
+            x += (margin - d) * solids_->normal(x);
+        }
+        for (int a = 0; a < 3; ++a)
+            if (grid_.periodic[a]) x[a] = lo[a] + std::fmod(std::fmod(x[a] - lo[a], extent[a]) + extent[a], extent[a]);
+        particles_.position[p] = x;
+    });
+}
+
+double Simulation::stableTimeStep() const {
+    double maxSpeed = 0;
+    for (const Vec3& v : particles_.velocity) maxSpeed = std::max(maxSpeed, v.norm());
+    const double dx = grid_.dx;
+    // Gravity can accelerate a resting liquid across a cell within one step; count it in.
+    double dt = scene_.solver.cfl * dx / (maxSpeed + std::sqrt(scene_.gravity.norm() * dx) + 1e-12);
+    if (scene_.material.surfaceTension > 0)  // capillary wave limit (Brackbill et al. 1992)
+        dt = std::min(dt, std::sqrt(scene_.material.density * dx * dx * dx /
+                                    (2 * M_PI * scene_.material.surfaceTension)));
+    return dt;
+}
+
+StepStats Simulation::step(double dt) {
+    StepStats stats;
+    stats.dt = dt;
+    auto t0 = Clock::now();
+    emit(dt);
+    transferToGrid();
+    stats.transferSeconds += secondsSince(t0);
+
+    t0 = Clock::now();
+    computeFractions();
+    extrapolateVelocity(2);
+    applyBodyForces(dt);
+    applySurfaceTension(dt);
+    updateViscosity();
+    stats.otherSeconds += secondsSince(t0);
+
+    t0 = Clock::now();
+    StokesProblem problem;
+    problem.grid = &grid_;
+    problem.weights = &fractions_;
+    problem.dt = dt;
+    problem.density = scene_.material.density;
+    problem.cellViscosity = &cellViscosity_;
+    problem.edgeViscosity = &edgeViscosity_;
+    problem.tolerance = scene_.solver.tolerance;
+    problem.maxIterations = scene_.solver.maxIterations;
+    const int picard = material_->shearDependent() ? scene_.solver.picardIterations : 1;
+    const std::array<Field, 3> uStar = state_.velocity;
+    for (int it = 0; it < picard; ++it) {
+        if (it > 0) {
+            updateViscosity();  // η from the last iterate's shear rates
+            state_.velocity = uStar;
+        }
+        const SolveStats s = solver_->solve(problem, state_);
+        stats.solve.iterations += s.iterations;
+        stats.solve.residual = s.residual;
+        stats.solve.unknowns = s.unknowns;
+        stats.solve.converged = s.converged;
+    }
+    stats.solveSeconds += secondsSince(t0);
+
+    t0 = Clock::now();
+    const Lattice& cells = fractions_.cell.lattice;
+    for (int a = 0; a < 3; ++a) {  // the solve's faces are now valid too; solids stay at rest
+        Field& u = state_.velocity[a];
+        for (int f = 0; f < u.lattice.count(); ++f) {
+            if (fractions_.solidFace[a][f]) {
+                u[f] = 0;
+                continue;
+            }
+            const Vec3i c = u.lattice.coords(f);
+            const int lo = cells.neighbour(c, a, -1);
+            Vec3i hiC = c;
+            const int hi = cells.resolve(hiC) ? cells.index(hiC[0], hiC[1], hiC[2]) : -1;
+            if ((lo >= 0 && fractions_.cell[lo] >= kMinWeight) || (hi >= 0 && fractions_.cell[hi] >= kMinWeight))
+                validFace_[a][f] = 1;
+        }
+    }
+    extrapolateVelocity(3);
+    transferToParticles();
+    stats.transferSeconds += secondsSince(t0);
+
+    t0 = Clock::now();
+    advectParticles(dt);
+    stats.otherSeconds += secondsSince(t0);
+    time_ += dt;
+    return stats;
+}
+
+FrameStats Simulation::advanceFrame() {
+    FrameStats stats;
+    const double end = (frame_ + 1) / scene_.fps;
+    while (time_ < end - 1e-12) {
+        double dt = stableTimeStep();
+        const double remaining = end - time_;
+        // Split what is left of the frame evenly rather than ending on a sliver of a step.
+        dt = remaining <= dt ? remaining : remaining / std::ceil(remaining / dt);
+        const StepStats s = step(dt);
+        ++stats.steps;
+        stats.solverIterations += s.solve.iterations;
+        stats.converged = stats.converged && s.solve.converged;
+        stats.transferSeconds += s.transferSeconds;
+        stats.solveSeconds += s.solveSeconds;
+        stats.otherSeconds += s.otherSeconds;
+    }
+    time_ = end;
+    ++frame_;
+    computeFractions();  // so that the frame's volume and weights describe its end state
+    for (const Vec3& x : particles_.position)
+        if (!x.allFinite()) throw std::runtime_error("simulation became non-finite at frame " + std::to_string(frame_));
+    stats.frame = frame_;
+    stats.simulatedTime = time_;
+    stats.liquidVolume = liquidVolume();
+    for (const Vec3& v : particles_.velocity) stats.maxSpeed = std::max(stats.maxSpeed, v.norm());
+    return stats;
+}
+
+double Simulation::liquidVolume() const {
+    double sum = 0;
+    for (double w : fractions_.cell.values) sum += w;
+    return sum * std::pow(grid_.dx, 3);
+}
+
+}  // namespace viscoscope::sim

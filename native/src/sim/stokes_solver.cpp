@@ -1,0 +1,306 @@
+#include "sim/stokes_solver.h"
+
+#include <Eigen/SparseCore>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <cmath>
+#include <functional>
+
+namespace viscoscope::sim {
+
+namespace {
+
+using Vec = Eigen::VectorXd;
+using SparseRows = Eigen::SparseMatrix<double, Eigen::RowMajor>;
+
+// One constraint row (a pressure or stress sample) as coefficients on face velocities.
+struct Term {
+    int axis, face;
+    double coefficient;
+};
+struct Row {
+    std::vector<Term> terms;
+    double compliance;  // W_τ/(2η) for stress rows, 0 for pressure rows
+    enum Kind { Pressure, Normal, Shear } kind;
+    int component, sample;  // which stress component / lattice index the row's unknown lives at
+};
+
+// The rows of H = [−W_p B ; W_τ D] (B: divergence, D: symmetric velocity gradient) for the
+// samples whose control volume holds liquid. Off-diagonal stress samples carry τ_ab and τ_ba
+// at once, so their weight W_τ is twice the edge fraction.
+std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stress) {
+    const Grid& g = *p.grid;
+    const VolumeFractions& w = *p.weights;
+    const Lattice cells = g.lattice(kCellCentre);
+    std::array<Lattice, 3> faces;
+    for (int a = 0; a < 3; ++a) faces[a] = g.lattice(kFace[a]);
+    const double invDx = 1.0 / g.dx;
+    std::vector<Row> rows;
+
+    // Solid faces (and faces beyond the domain) hold the solid's zero velocity: they add nothing
+    // to H u, so they are left out; a row left with no face at all constrains nothing.
+    auto faceAt = [&](int axis, Vec3i c) {
+        if (!faces[axis].resolve(c)) return -1;
+        const int f = faces[axis].index(c[0], c[1], c[2]);
+        return w.solidFace[axis][f] ? -1 : f;
+    };
+    auto keep = [&](Row&& row) {
+        if (!row.terms.empty()) rows.push_back(std::move(row));
+    };
+    auto add = [&](Row& row, int axis, int face, double coefficient) {
+        if (face >= 0) row.terms.push_back({axis, face, coefficient});
+    };
+
+    for (int c = 0; c < cells.count(); ++c) {
+        const double wc = w.cell[c];
+        if (wc < kMinWeight) continue;
+        const Vec3i ijk = cells.coords(c);
+        if (pressure) {
+            Row row{{}, 0.0, Row::Pressure, 0, c};
+            for (int a = 0; a < 3; ++a) {
+                add(row, a, faceAt(a, ijk), wc * invDx);
+                add(row, a, faceAt(a, ijk + Vec3i::Unit(a)), -wc * invDx);
+            }
+            keep(std::move(row));
+        }
+        if (stress)
+            for (int a = 0; a < 3; ++a) {
+                Row row{{}, wc / (2 * (*p.cellViscosity)[c]), Row::Normal, a, c};
+                add(row, a, faceAt(a, ijk + Vec3i::Unit(a)), wc * invDx);
+                add(row, a, faceAt(a, ijk), -wc * invDx);
+                keep(std::move(row));
+            }
+    }
+    if (stress)
+        for (int e = 0; e < 3; ++e) {  // edges parallel to axis e carry τ_ab, {a, b, e} = {0, 1, 2}
+            const int a = (e + 1) % 3, b = (e + 2) % 3;
+            const Field& we = w.edge[e];
+            for (int s = 0; s < we.lattice.count(); ++s) {
+                if (we[s] < kMinWeight) continue;
+                const Vec3i ijk = we.lattice.coords(s);
+                const double k = we[s] * invDx;
+                Row row{{}, we[s] / (*p.edgeViscosity)[e][s], Row::Shear, e, s};
+                add(row, a, faceAt(a, ijk), k);
+                add(row, a, faceAt(a, ijk - Vec3i::Unit(b)), -k);
+                add(row, b, faceAt(b, ijk), k);
+                add(row, b, faceAt(b, ijk - Vec3i::Unit(a)), -k);
+                keep(std::move(row));
+            }
+        }
+    return rows;
+}
+
+// The face velocities the rows touch: the velocity unknowns of the step.
+struct FaceUnknowns {
+    std::array<std::vector<int>, 3> dofOfFace;
+    std::vector<std::pair<int, int>> faceOfDof;
+    Vec inverseMass;
+};
+
+FaceUnknowns faceUnknowns(const StokesProblem& p, const std::vector<Row>& rows) {
+    FaceUnknowns u;
+    for (int a = 0; a < 3; ++a) u.dofOfFace[a].assign(p.weights->face[a].values.size(), -1);
+    for (const Row& row : rows)
+        for (const Term& t : row.terms)
+            if (u.dofOfFace[t.axis][t.face] < 0) {
+                u.dofOfFace[t.axis][t.face] = static_cast<int>(u.faceOfDof.size());
+                u.faceOfDof.emplace_back(t.axis, t.face);
+            }
+    u.inverseMass.resize(u.faceOfDof.size());
+    for (size_t d = 0; d < u.faceOfDof.size(); ++d) {
+        const auto [a, f] = u.faceOfDof[d];
+        u.inverseMass[d] = 1.0 / (p.density * std::max(p.weights->face[a][f], kMinMassFraction));
+    }
+    return u;
+}
+
+SparseRows assemble(const std::vector<Row>& rows, const FaceUnknowns& u) {
+    std::vector<Eigen::Triplet<double>> triplets;
+    for (size_t r = 0; r < rows.size(); ++r)
+        for (const Term& t : rows[r].terms)
+            triplets.emplace_back(static_cast<int>(r), u.dofOfFace[t.axis][t.face], t.coefficient);
+    SparseRows h(static_cast<int>(rows.size()), static_cast<int>(u.faceOfDof.size()));
+    h.setFromTriplets(triplets.begin(), triplets.end());
+    return h;
+}
+
+// y = A x for a row-major sparse A, rows split over TBB threads.
+void multiply(const SparseRows& a, const Vec& x, Vec& y) {
+    y.resize(a.rows());
+    tbb::parallel_for(tbb::blocked_range<int>(0, static_cast<int>(a.rows()), 2048),
+                      [&](const tbb::blocked_range<int>& range) {
+                          for (int r = range.begin(); r != range.end(); ++r) {
+                              double sum = 0;
+                              for (SparseRows::InnerIterator it(a, r); it; ++it)
+                                  sum += it.value() * x[it.col()];
+                              y[r] = sum;
+                          }
+                      });
+}
+
+double dot(const Vec& a, const Vec& b) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<Eigen::Index>(0, a.size(), 8192), 0.0,
+        [&](const tbb::blocked_range<Eigen::Index>& r, double sum) {
+            return sum + a.segment(r.begin(), r.size()).dot(b.segment(r.begin(), r.size()));
+        },
+        std::plus<double>());
+}
+
+struct CgResult {
+    int iterations = 0;
+    double residual = 0;
+    bool converged = false;
+};
+
+// Jacobi-preconditioned conjugate gradient on a matrix-free SPD operator, from the guess in x.
+// Written here rather than Eigen::ConjugateGradient because the operator is a product of three
+// factors that is never assembled, and Eigen's matrix-free path needs a wrapper longer than this loop.
+CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, const Vec& diagonal,
+                           const Vec& b, Vec& x, double tolerance, int maxIterations) {
+    CgResult result;
+    const double bNorm = std::sqrt(dot(b, b));
+    if (bNorm == 0) {
+        x.setZero();
+        result.converged = true;
+        return result;
+    }
+    const Vec inverseDiagonal = diagonal.cwiseInverse();
+    Vec r(b.size()), ap(b.size());
+    apply(x, ap);
+    r = b - ap;
+    Vec z = inverseDiagonal.cwiseProduct(r);
+    Vec p = z;
+    double rz = dot(r, z);
+    for (; result.iterations < maxIterations; ++result.iterations) {
+        result.residual = std::sqrt(dot(r, r)) / bNorm;
+        if (result.residual <= tolerance) break;
+        apply(p, ap);
+        const double alpha = rz / dot(p, ap);
+        x += alpha * p;
+        r -= alpha * ap;
+        z = inverseDiagonal.cwiseProduct(r);
+        const double rzNext = dot(r, z);
+        p = z + (rzNext / rz) * p;
+        rz = rzNext;
+    }
+    result.residual = std::sqrt(dot(r, r)) / bNorm;
+    result.converged = result.residual <= tolerance && std::isfinite(result.residual);
+    return result;
+}
+
+Vec gatherVelocity(const StokesState& s, const FaceUnknowns& u) {
+    Vec v(u.faceOfDof.size());
+    for (size_t d = 0; d < u.faceOfDof.size(); ++d) v[d] = s.velocity[u.faceOfDof[d].first][u.faceOfDof[d].second];
+    return v;
+}
+
+void scatterVelocity(const Vec& v, const FaceUnknowns& u, StokesState& s) {
+    for (size_t d = 0; d < u.faceOfDof.size(); ++d) s.velocity[u.faceOfDof[d].first][u.faceOfDof[d].second] = v[d];
+}
+
+Field& unknownField(StokesState& s, const Row& row) {
+    switch (row.kind) {
+        case Row::Pressure: return s.pressure;
+        case Row::Normal: return s.normalStress[row.component];
+        case Row::Shear: break;
+    }
+    return s.shearStress[row.component];
+}
+
+// Eliminated-velocity system [Δt H M⁻¹ Hᵀ + diag(compliance)] x = H u*, then u = u* − Δt M⁻¹ Hᵀ x.
+// With pressure rows only, this is the classic variational pressure projection.
+CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vector<Row>& rows) {
+    const FaceUnknowns u = faceUnknowns(p, rows);
+    const SparseRows h = assemble(rows, u);
+    const SparseRows ht = h.transpose();
+    Vec compliance(rows.size()), x(rows.size());
+    for (size_t r = 0; r < rows.size(); ++r) {
+        compliance[r] = rows[r].compliance;
+        x[r] = unknownField(s, rows[r])[rows[r].sample];  // warm start from the previous step
+    }
+    const Vec uStar = gatherVelocity(s, u);
+    Vec b;
+    multiply(h, uStar, b);
+
+    Vec diagonal = compliance;
+    for (int r = 0; r < h.outerSize(); ++r)
+        for (SparseRows::InnerIterator it(h, r); it; ++it)
+            diagonal[r] += p.dt * it.value() * it.value() * u.inverseMass[it.col()];
+
+    Vec faceForce;
+    auto apply = [&](const Vec& in, Vec& out) {
+        multiply(ht, in, faceForce);
+        faceForce = (p.dt * u.inverseMass).cwiseProduct(faceForce);
+        multiply(h, faceForce, out);
+        out += compliance.cwiseProduct(in);
+    };
+    const CgResult cg = conjugateGradient(apply, diagonal, b, x, p.tolerance, p.maxIterations);
+
+    multiply(ht, x, faceForce);
+    scatterVelocity(uStar - p.dt * u.inverseMass.cwiseProduct(faceForce), u, s);
+    for (size_t r = 0; r < rows.size(); ++r) unknownField(s, rows[r])[rows[r].sample] = x[r];
+    return cg;
+}
+
+// Implicit viscosity alone, in velocity unknowns: [M + Δt H_τᵀ diag(1/compliance) H_τ] u = M u*.
+CgResult solveViscosity(const StokesProblem& p, StokesState& s, const std::vector<Row>& rows) {
+    const FaceUnknowns u = faceUnknowns(p, rows);
+    const SparseRows h = assemble(rows, u);
+    const SparseRows ht = h.transpose();
+    Vec stiffness(rows.size());
+    for (size_t r = 0; r < rows.size(); ++r) stiffness[r] = p.dt / rows[r].compliance;
+    const Vec mass = u.inverseMass.cwiseInverse();
+    Vec x = gatherVelocity(s, u);
+    const Vec b = mass.cwiseProduct(x);
+
+    Vec diagonal = mass;
+    for (int r = 0; r < h.outerSize(); ++r)
+        for (SparseRows::InnerIterator it(h, r); it; ++it)
+            diagonal[it.col()] += stiffness[r] * it.value() * it.value();
+
+    Vec strain;
+    auto apply = [&](const Vec& in, Vec& out) {
+        multiply(h, in, strain);
+        strain = stiffness.cwiseProduct(strain);
+        multiply(ht, strain, out);
+        out += mass.cwiseProduct(in);
+    };
+    const CgResult cg = conjugateGradient(apply, diagonal, b, x, p.tolerance, p.maxIterations);
+    scatterVelocity(x, u, s);
+    return cg;
+}
+
+void accumulate(SolveStats& stats, const CgResult& cg, size_t unknowns) {
+    stats.iterations += cg.iterations;
+    stats.residual = std::max(stats.residual, cg.residual);
+    stats.unknowns = std::max(stats.unknowns, static_cast<int>(unknowns));
+    stats.converged = stats.converged && cg.converged;
+}
+
+}  // namespace
+
+SolveStats StokesSolver::solve(const StokesProblem& problem, StokesState& state) {
+    SolveStats stats;
+    const std::vector<Row> rows = constraintRows(problem, true, true);
+    accumulate(stats, solveEliminated(problem, state, rows), rows.size());
+    return stats;
+}
+
+SolveStats DecoupledViscositySolver::solve(const StokesProblem& problem, StokesState& state) {
+    SolveStats stats;
+    const std::vector<Row> stressRows = constraintRows(problem, false, true);
+    accumulate(stats, solveViscosity(problem, state, stressRows), stressRows.size());
+    const std::vector<Row> pressureRows = constraintRows(problem, true, false);
+    accumulate(stats, solveEliminated(problem, state, pressureRows), pressureRows.size());
+    return stats;
+}
+
+std::unique_ptr<PressureViscositySolver> makeSolver(bool unified) {
+    if (unified) return std::make_unique<StokesSolver>();
+    return std::make_unique<DecoupledViscositySolver>();
+}
+
+}  // namespace viscoscope::sim

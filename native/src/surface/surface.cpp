@@ -1,0 +1,150 @@
+#include "surface/surface.h"
+
+#include "scene/scene.h"
+
+#include <openvdb/tools/LevelSetFilter.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
+#include <openvdb/tools/VolumeToMesh.h>
+
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+
+namespace viscoscope::surface {
+
+namespace {
+
+// The particle list interface tools::ParticlesToLevelSet expects.
+class ParticleList {
+public:
+    using PosType = openvdb::Vec3R;
+    ParticleList(const std::vector<Eigen::Vector3d>& positions, double radius)
+        : positions_(positions), radius_(radius) {}
+    size_t size() const { return positions_.size(); }
+    void getPos(size_t n, PosType& xyz) const {
+        xyz = PosType(positions_[n].x(), positions_[n].y(), positions_[n].z());
+    }
+    void getPosRad(size_t n, PosType& xyz, openvdb::Real& radius) const {
+        getPos(n, xyz);
+        radius = radius_;
+    }
+
+private:
+    const std::vector<Eigen::Vector3d>& positions_;
+    double radius_;
+};
+
+openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
+    auto transform = openvdb::math::Transform::createLinearTransform(grid.dx);
+    const Eigen::Vector3d centre = grid.origin + Eigen::Vector3d::Constant(0.5 * grid.dx);
+    transform->postTranslate(openvdb::Vec3d(centre.x(), centre.y(), centre.z()));
+    return transform;
+}
+
+}  // namespace
+
+openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
+                                       const SurfaceOptions& options) {
+    openvdb::initialize();
+    const double voxel = cellSize / options.voxelsPerCell;
+    auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxel, 3.0);
+    grid->setName("surface");
+    ParticleList list(positions, options.particleRadius * cellSize);
+    openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
+    raster.setRmin(0.5);  // our radius is fixed in cells; never drop particles for being small
+    raster.rasterizeSpheres(list);
+    raster.finalize(true);
+    if (options.smoothingPasses > 0) {
+        openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
+        for (int i = 0; i < options.smoothingPasses; ++i) filter.gaussian(1);
+    }
+    return grid;
+}
+
+void meshLevelSet(const openvdb::FloatGrid& levelSet, std::vector<openvdb::Vec3s>& points,
+                  std::vector<openvdb::Vec3I>& triangles) {
+    std::vector<openvdb::Vec4I> quads;
+    points.clear();
+    triangles.clear();
+    openvdb::tools::volumeToMesh(levelSet, points, triangles, quads, 0.0);
+    for (const openvdb::Vec4I& q : quads) {
+        triangles.emplace_back(q[0], q[1], q[2]);
+        triangles.emplace_back(q[0], q[2], q[3]);
+    }
+}
+
+void writeFrameVdb(const std::filesystem::path& file, const sim::Simulation& simulation,
+                   openvdb::FloatGrid::Ptr levelSet) {
+    const sim::Grid& grid = simulation.grid();
+    const sim::Lattice cells = grid.lattice(sim::kCellCentre);
+    const sim::VolumeFractions& fractions = simulation.fractions();
+    auto velocity = openvdb::Vec3fGrid::create(openvdb::Vec3f(0));
+    auto pressure = openvdb::FloatGrid::create(0.f);
+    velocity->setName("velocity");
+    pressure->setName("pressure");
+    velocity->setTransform(cellCentredTransform(grid));  // sampled at cell centres
+    pressure->setTransform(cellCentredTransform(grid));
+    auto vAccess = velocity->getAccessor();
+    auto pAccess = pressure->getAccessor();
+    for (int c = 0; c < cells.count(); ++c) {
+        if (fractions.cell[c] < sim::kMinWeight) continue;
+        const Eigen::Vector3i ijk = cells.coords(c);
+        const Eigen::Vector3d v = simulation.velocityAt(grid.position(sim::kCellCentre, ijk));
+        const openvdb::Coord coord(ijk[0], ijk[1], ijk[2]);
+        vAccess.setValue(coord, openvdb::Vec3f(v.x(), v.y(), v.z()));
+        pAccess.setValue(coord, static_cast<float>(simulation.fields().pressure[c]));
+    }
+    openvdb::GridPtrVec grids{levelSet, velocity, pressure};
+    openvdb::io::File out(file.string());
+    out.write(grids);
+    out.close();
+}
+
+void writeParticles(const std::filesystem::path& file, const sim::Particles& particles) {
+    std::ofstream out(file, std::ios::binary);
+    if (!out) throw std::runtime_error("cannot write " + file.string());
+    const uint32_t version = 1;
+    const uint64_t count = particles.position.size();
+    out.write("VSCP", 4);
+    out.write(reinterpret_cast<const char*>(&version), sizeof version);
+    out.write(reinterpret_cast<const char*>(&count), sizeof count);
+    std::vector<float> record(6 * count);
+    for (size_t p = 0; p < count; ++p)
+        for (int a = 0; a < 3; ++a) {
+            record[6 * p + a] = static_cast<float>(particles.position[p][a]);
+            record[6 * p + 3 + a] = static_cast<float>(particles.velocity[p][a]);
+        }
+    out.write(reinterpret_cast<const char*>(record.data()), std::streamsize(record.size() * sizeof(float)));
+}
+
+sim::Particles readParticles(const std::filesystem::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    char magic[4];
+    uint32_t version = 0;
+    uint64_t count = 0;
+    if (!in.read(magic, 4) || std::memcmp(magic, "VSCP", 4) != 0 ||
+        !in.read(reinterpret_cast<char*>(&version), sizeof version) || version != 1 ||
+        !in.read(reinterpret_cast<char*>(&count), sizeof count))
+        throw InputError(file.string() + ": not a Viscoscope particle file (version 1)");
+    std::vector<float> record(6 * count);
+    if (!in.read(reinterpret_cast<char*>(record.data()), std::streamsize(record.size() * sizeof(float))))
+        throw InputError(file.string() + ": truncated particle file");
+    sim::Particles particles;
+    for (size_t p = 0; p < count; ++p) {
+        particles.position.emplace_back(record[6 * p], record[6 * p + 1], record[6 * p + 2]);
+        particles.velocity.emplace_back(record[6 * p + 3], record[6 * p + 4], record[6 * p + 5]);
+        particles.affine.push_back(Eigen::Matrix3d::Zero());
+    }
+    return particles;
+}
+
+void writeObj(const std::filesystem::path& file, const std::vector<openvdb::Vec3s>& points,
+              const std::vector<openvdb::Vec3I>& triangles) {
+    std::ofstream out(file);
+    if (!out) throw std::runtime_error("cannot write " + file.string());
+    for (const auto& p : points) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+    // OpenVDB's winding faces inward for level sets; OBJ expects counter-clockwise outward faces.
+    for (const auto& t : triangles) out << "f " << t[0] + 1 << ' ' << t[2] + 1 << ' ' << t[1] + 1 << '\n';
+}
+
+}  // namespace viscoscope::surface
