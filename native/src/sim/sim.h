@@ -58,6 +58,7 @@ public:
     const Scene& scene() const { return scene_; }
     const Grid& grid() const { return grid_; }
     const Particles& particles() const { return particles_; }
+    Particles& particles() { return particles_; }  // to set initial velocities
     const StokesState& fields() const { return state_; }  // velocity on faces, pressure at cells
     const VolumeFractions& fractions() const { return fractions_; }
     double time() const { return time_; }

@@ -20,6 +20,8 @@ namespace {
 constexpr double kParticleRadius = 0.6;
 // Particles are kept this far (in cells) outside solids after advection.
 constexpr double kSolidMargin = 0.05;
+// Smoothing passes over the liquid distance before its curvature is taken for surface tension.
+constexpr int kCurvatureSmoothing = 2;
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) {
@@ -29,6 +31,28 @@ double secondsSince(Clock::time_point t0) {
 // Smooth Heaviside of a signed distance over a half-cell of width h: the inside fraction of a
 // half-cell whose centre is at distance phi from a planar interface.
 double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
+
+// Averages each cell with its six neighbours (the centre counted twice), `passes` times: removes
+// the bumps a union of particle spheres leaves on a distance field before it is used.
+void smoothCellField(Field& phi, int passes) {
+    const Lattice& cells = phi.lattice;
+    for (int pass = 0; pass < passes; ++pass) {
+        Field smoothed = phi;
+        tbb::parallel_for(0, cells.count(), [&](int c) {
+            const Vec3i ijk = cells.coords(c);
+            double sum = phi[c] * 2;
+            int count = 2;
+            for (int a = 0; a < 3; ++a)
+                for (int d : {-1, 1})
+                    if (const int nb = cells.neighbour(ijk, a, d); nb >= 0) {
+                        sum += phi[nb];
+                        ++count;
+                    }
+            smoothed[c] = sum / count;
+        });
+        phi = std::move(smoothed);
+    }
+}
 
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
     if (const auto* box = std::get_if<LiquidBox>(&source))
@@ -182,6 +206,7 @@ void Simulation::computeFractions() {
     const double dx = grid_.dx, radius = kParticleRadius * dx;
     std::fill(liquidPhi_.values.begin(), liquidPhi_.values.end(), 3 * dx);
     for (const Vec3& x : particles_.position) {
+        if (!x.allFinite()) continue;  // advanceFrame reports a blow-up; never index with it
         const Vec3i base = ((x - grid_.origin) / dx).array().floor().cast<int>();
         for (int dk = -1; dk <= 1; ++dk)
             for (int dj = -1; dj <= 1; ++dj)
@@ -294,24 +319,9 @@ void Simulation::applySurfaceTension(double dt) {
     if (sigma <= 0) return;
     const Lattice& cells = liquidPhi_.lattice;
     const double dx = grid_.dx;
-    // Smooth the particle-built distance (a union of spheres) before differentiating it twice.
+    // Curvature differentiates twice: smooth further than the fractions need.
     Field phi = liquidPhi_;
-    for (int pass = 0; pass < 2; ++pass) {
-        Field smoothed = phi;
-        for (int c = 0; c < cells.count(); ++c) {
-            const Vec3i ijk = cells.coords(c);
-            double sum = phi[c] * 2;
-            int count = 2;
-            for (int a = 0; a < 3; ++a)
-                for (int d : {-1, 1})
-                    if (const int nb = cells.neighbour(ijk, a, d); nb >= 0) {
-                        sum += phi[nb];
-                        ++count;
-                    }
-            smoothed[c] = sum / count;
-        }
-        phi = std::move(smoothed);
-    }
+    smoothCellField(phi, kCurvatureSmoothing);
     auto value = [&](Vec3i c) { return cells.resolve(c) ? phi[cells.index(c[0], c[1], c[2])] : 3 * dx; };
     Field pressureOutside(cells);
     for (int c = 0; c < cells.count(); ++c) {
@@ -353,8 +363,7 @@ void Simulation::applySurfaceTension(double dt) {
     }
 }
 
-// Per-sample viscosity: the material law at the local shear rate, reduced at walls by the
-// Navier slip length (a wall stress sample sees η·(Δx/2)/(Δx/2 + λ): λ = 0 is no-slip).
+// Per-sample viscosity: the material law at the local shear rate (constant when Newtonian).
 void Simulation::updateViscosity() {
     const double eta0 = scene_.material.viscosity;
     const Lattice& cells = cellViscosity_.lattice;
@@ -378,39 +387,26 @@ void Simulation::updateViscosity() {
             cellViscosity_[c] = material_->viscosity(std::sqrt(2 * strain.squaredNorm()));
         }
     }
-    const double slip = scene_.material.slipLength;
     for (int e = 0; e < 3; ++e) {
         Field& eta = edgeViscosity_[e];
+        if (!material_->shearDependent()) {
+            std::fill(eta.values.begin(), eta.values.end(), eta0);
+            continue;
+        }
         const int a = (e + 1) % 3, b = (e + 2) % 3;
-        for (int s = 0; s < eta.lattice.count(); ++s) {
+        for (int s = 0; s < eta.lattice.count(); ++s) {  // mean of the four cells around the edge
             const Vec3i ijk = eta.lattice.coords(s);
-            if (material_->shearDependent()) {  // mean of the four cells around the edge
-                double sum = 0;
-                int count = 0;
-                for (int da = -1; da <= 0; ++da)
-                    for (int db = -1; db <= 0; ++db) {
-                        Vec3i c = ijk + da * Vec3i::Unit(a) + db * Vec3i::Unit(b);
-                        if (cells.resolve(c)) {
-                            sum += cellViscosity_[cells.index(c[0], c[1], c[2])];
-                            ++count;
-                        }
-                    }
-                eta[s] = count ? sum / count : eta0;
-            } else {
-                eta[s] = eta0;
-            }
-            if (slip > 0 && fractions_.edge[e][s] >= kMinWeight) {
-                bool wall = false;
-                for (int axis : {a, b}) {
-                    const Lattice& faces = fractions_.face[axis].lattice;
-                    const int other = axis == a ? b : a;
-                    for (int d : {-1, 0}) {
-                        Vec3i f = ijk + d * Vec3i::Unit(other);
-                        wall = wall || !faces.resolve(f) || fractions_.solidFace[axis][faces.index(f[0], f[1], f[2])];
+            double sum = 0;
+            int count = 0;
+            for (int da = -1; da <= 0; ++da)
+                for (int db = -1; db <= 0; ++db) {
+                    Vec3i c = ijk + da * Vec3i::Unit(a) + db * Vec3i::Unit(b);
+                    if (cells.resolve(c)) {
+                        sum += cellViscosity_[cells.index(c[0], c[1], c[2])];
+                        ++count;
                     }
                 }
-                if (wall) eta[s] *= 0.5 * dx / (0.5 * dx + slip);
-            }
+            eta[s] = count ? sum / count : eta0;
         }
     }
 }
@@ -497,6 +493,8 @@ StepStats Simulation::step(double dt) {
     problem.density = scene_.material.density;
     problem.cellViscosity = &cellViscosity_;
     problem.edgeViscosity = &edgeViscosity_;
+    problem.slipLength = scene_.material.slipLength;
+    problem.solidDistance = [this](const Vec3& x) { return solids_->distance(x); };
     problem.tolerance = scene_.solver.tolerance;
     problem.maxIterations = scene_.solver.maxIterations;
     const int picard = material_->shearDependent() ? scene_.solver.picardIterations : 1;

@@ -40,17 +40,38 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
     std::vector<Row> rows;
 
     // Solid faces (and faces beyond the domain) hold the solid's zero velocity: they add nothing
-    // to H u, so they are left out; a row left with no face at all constrains nothing.
+    // to the divergence, so pressure rows leave them out; a row left with no face constrains nothing.
     auto faceAt = [&](int axis, Vec3i c) {
         if (!faces[axis].resolve(c)) return -1;
         const int f = faces[axis].index(c[0], c[1], c[2]);
         return w.solidFace[axis][f] ? -1 : f;
     };
+    auto add = [&](Row& row, int axis, int face, double coefficient) {
+        if (face >= 0) row.terms.push_back({axis, face, coefficient});
+    };
     auto keep = [&](Row&& row) {
         if (!row.terms.empty()) rows.push_back(std::move(row));
     };
-    auto add = [&](Row& row, int axis, int face, double coefficient) {
-        if (face >= 0) row.terms.push_back({axis, face, coefficient});
+    // A velocity difference k (u(hi) − u(lo)) in a stress row. Where one of the two faces is solid,
+    // its velocity is a ghost value that puts the wall condition where the wall really is (not at
+    // the solid face): u_ghost = u_fluid (d_ghost + λ)/(d_fluid + λ), the linear profile through a
+    // Navier slip condition u = λ ∂u/∂n at the wall (λ = 0: no-slip). This keeps cut-cell walls
+    // consistent with the cut-cell weights.
+    auto addDifference = [&](Row& row, int axis, const Vec3i& lo, const Vec3i& hi, double k, double slip) {
+        const int fLo = faceAt(axis, lo), fHi = faceAt(axis, hi);
+        if (fLo >= 0 && fHi >= 0) {
+            add(row, axis, fHi, k);
+            add(row, axis, fLo, -k);
+            return;
+        }
+        if (fLo < 0 && fHi < 0) return;
+        const Vec3i& fluid = fLo >= 0 ? lo : hi;
+        const Vec3i& ghost = fLo >= 0 ? hi : lo;
+        const double dFluid = std::max(p.solidDistance(g.position(kFace[axis], fluid)), 0.1 * g.dx);
+        const double dGhost = std::min(p.solidDistance(g.position(kFace[axis], ghost)), 0.0);
+        const double ratio = (dGhost + slip) / (dFluid + slip);
+        if (fHi >= 0) add(row, axis, fHi, k * (1 - ratio));
+        else add(row, axis, fLo, -k * (1 - ratio));
     };
 
     for (int c = 0; c < cells.count(); ++c) {
@@ -66,10 +87,9 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
             keep(std::move(row));
         }
         if (stress)
-            for (int a = 0; a < 3; ++a) {
+            for (int a = 0; a < 3; ++a) {  // walls never slip in the normal direction
                 Row row{{}, wc / (2 * (*p.cellViscosity)[c]), Row::Normal, a, c};
-                add(row, a, faceAt(a, ijk + Vec3i::Unit(a)), wc * invDx);
-                add(row, a, faceAt(a, ijk), -wc * invDx);
+                addDifference(row, a, ijk, ijk + Vec3i::Unit(a), wc * invDx, 0.0);
                 keep(std::move(row));
             }
     }
@@ -82,10 +102,8 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
                 const Vec3i ijk = we.lattice.coords(s);
                 const double k = we[s] * invDx;
                 Row row{{}, we[s] / (*p.edgeViscosity)[e][s], Row::Shear, e, s};
-                add(row, a, faceAt(a, ijk), k);
-                add(row, a, faceAt(a, ijk - Vec3i::Unit(b)), -k);
-                add(row, b, faceAt(b, ijk), k);
-                add(row, b, faceAt(b, ijk - Vec3i::Unit(a)), -k);
+                addDifference(row, a, ijk - Vec3i::Unit(b), ijk, k, p.slipLength);
+                addDifference(row, b, ijk - Vec3i::Unit(a), ijk, k, p.slipLength);
                 keep(std::move(row));
             }
         }

@@ -14,6 +14,7 @@
 #include <Eigen/Core>
 
 #include <array>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -34,6 +35,8 @@ struct StokesProblem {
     double density = 1;
     const Field* cellViscosity = nullptr;                 // η at cell centres
     const std::array<Field, 3>* edgeViscosity = nullptr;  // η at edges
+    double slipLength = 0;                                // Navier slip at walls, m
+    std::function<double(const Vec3&)> solidDistance;     // signed, negative inside solids
     double tolerance = 1e-4;
     int maxIterations = 2000;
 };

@@ -1,0 +1,88 @@
+// Scene validation: every bad field is named in the error; a valid scene round-trips.
+#include "scene/scene.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+using namespace viscoscope;
+using nlohmann::json;
+
+namespace {
+
+json validScene() {
+    return json::parse(R"({
+      "format": "viscoscope.scene", "version": 1,
+      "domain": {"min": [-0.09, -0.09, 0], "max": [0.09, 0.09, 0.18], "resolution": 32},
+      "solids": [{"type": "ground", "height": 0},
+                 {"type": "cup", "position": [0, 0, 0.1], "inner_radius": 0.043, "height": 0.05,
+                  "wall_thickness": 0.006, "bottom_thickness": 0.005, "hole_radius": 0.009}],
+      "liquids": [{"type": "cup_fill", "cup": 1, "volume": 1.7e-4}],
+      "material": {"density": 1400, "viscosity": 8, "surface_tension": 0.07},
+      "fps": 30, "frames": 10
+    })");
+}
+
+std::string errorOf(const json& doc) {
+    try {
+        parseScene(doc, "scene.json");
+    } catch (const InputError& e) {
+        return e.what();
+    }
+    return "";
+}
+
+}  // namespace
+
+TEST(Scene, ValidSceneParsesInSiUnits) {
+    const Scene s = parseScene(validScene(), "scene.json");
+    EXPECT_DOUBLE_EQ(s.material.viscosity, 8);
+    EXPECT_EQ(s.cellCounts(), Eigen::Vector3i(32, 32, 32));
+    EXPECT_NEAR(s.cellSize(), 0.18 / 32, 1e-15);
+    ASSERT_TRUE(std::holds_alternative<CupSolid>(s.solids[1]));
+    EXPECT_DOUBLE_EQ(std::get<CupSolid>(s.solids[1]).holeRadius, 0.009);
+}
+
+TEST(Scene, RoundTripsThroughJson) {
+    const Scene a = parseScene(validScene(), "scene.json");
+    const Scene b = parseScene(sceneToJson(a), "copy.json");
+    EXPECT_EQ(sceneToJson(a), sceneToJson(b));
+}
+
+TEST(Scene, BadFieldsAreNamed) {
+    struct Case {
+        std::string pointer;
+        json value;
+        std::string expected;
+    };
+    const std::vector<Case> cases{
+        {"/material/viscosity", -1.0, "scene.json.material.viscosity: must be > 0"},
+        {"/material/density", 0.0, "scene.json.material.density: must be > 0"},
+        {"/material/viscosity", "thick", "scene.json.material.viscosity: must be a number"},
+        {"/solids/1/hole_radius", 0.05, "scene.json.solids[1].hole_radius: must be smaller than inner_radius"},
+        {"/domain/resolution", 2, "scene.json.domain.resolution: must be in [4, 1024]"},
+        {"/domain/max", json::array({-1, 1, 1}), "scene.json.domain.max: must be greater than min"},
+        {"/liquids", json::array(), "scene.json.liquids: must be a non-empty array"},
+        {"/liquids/0/cup", 0, "scene.json.liquids[0].cup: must be the index of a solid of type 'cup'"},
+        {"/liquids/0/volume", 1.0, "scene.json.liquids[0].volume: exceeds the cup's capacity"},
+        {"/version", 99, "scene.json.version: is 99, newer than this engine reads"},
+        {"/solids/0/type", "sphere", "scene.json.solids[0].type: unknown solid type 'sphere'"},
+    };
+    for (const Case& c : cases) {
+        json doc = validScene();
+        doc[json::json_pointer(c.pointer)] = c.value;
+        EXPECT_EQ(errorOf(doc).rfind(c.expected, 0), 0u) << c.pointer << " gave: " << errorOf(doc);
+    }
+    json missing = validScene();
+    missing["material"].erase("density");
+    EXPECT_EQ(errorOf(missing), "scene.json.material.density: missing");
+}
+
+TEST(Scene, NonFiniteAndMissingFilesAreRejected) {
+    json doc = validScene();
+    doc["gravity"] = json::array({0, 0, std::nan("")});  // serialized as null
+    EXPECT_NE(errorOf(doc).find("gravity"), std::string::npos);
+    EXPECT_THROW(loadScene("/nonexistent/scene.json"), InputError);
+    doc = validScene();
+    doc["solids"].push_back({{"type", "mesh"}, {"path", "/nonexistent/dipper.obj"}});
+    EXPECT_NE(errorOf(doc).find("solids[2].path: cannot read mesh file"), std::string::npos);
+}
