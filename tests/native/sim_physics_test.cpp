@@ -7,7 +7,10 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <algorithm>
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 
 using namespace viscoscope;
 using nlohmann::json;
@@ -44,8 +47,8 @@ Vec3 angularMomentum(const sim::Simulation& s, const Vec3& centre) {
 
 // 1. A layer of liquid resting in a box stays at rest. Spurious speeds are measured against the
 // speed of falling one cell, sqrt(g Δx) (0.157 m/s here). Claimed: below 5 % of it without surface
-// tension; with σ the particle-built curvature is noisy and parasitic currents reach ~20 %, which
-// this bound (25 %) documents rather than hides.
+// tension and below 10 % with water's σ, whose parasitic currents come from the curvature of a
+// particle-built surface.
 TEST(Physics, HydrostaticRestWithAndWithoutSurfaceTension) {
     for (double sigma : {0.0, 0.07}) {
         json doc = baseScene(1.0, 16);
@@ -61,7 +64,7 @@ TEST(Physics, HydrostaticRestWithAndWithoutSurfaceTension) {
         const double drift = s.liquidVolume() / v0 - 1;
         std::printf("hydrostatic sigma=%.2f: max spurious speed %.2e m/s, volume drift %.2e\n", sigma, worst, drift);
         const double fallSpeed = std::sqrt(9.81 * s.grid().dx);
-        EXPECT_LT(worst, (sigma > 0 ? 0.25 : 0.05) * fallSpeed);
+        EXPECT_LT(worst, (sigma > 0 ? 0.10 : 0.05) * fallSpeed);
         EXPECT_LT(std::abs(drift), 0.01);
     }
 }
@@ -122,10 +125,9 @@ TEST(Physics, RotatingViscousBallKeepsAngularMomentum) {
     }
 }
 
-// Nothing blows up from syrup to tar on the draining-cup scene. (Known gap: at η = 1e-3 Pa·s,
-// water, the stream breaks up and the step grows unstable; see issue notes.)
-TEST(Physics, StableFromSyrupToTar) {
-    for (double eta : {1.0, 1e3}) {
+// Nothing blows up across six decades of viscosity on the draining-cup scene.
+TEST(Physics, StableFromWaterToTar) {
+    for (double eta : {1e-3, 1.0, 1e3}) {
         json doc = baseScene(eta, 20);
         doc["domain"] = {{"min", {-0.09, -0.09, 0}}, {"max", {0.09, 0.09, 0.18}}, {"resolution", 20}};
         doc["solids"] = {{{"type", "ground"}, {"height", 0}},
@@ -137,6 +139,78 @@ TEST(Physics, StableFromSyrupToTar) {
         for (int f = 0; f < 6; ++f) ASSERT_NO_THROW(s.advanceFrame()) << "eta=" << eta;
         EXPECT_TRUE(std::isfinite(s.liquidVolume()));
         EXPECT_LT(maxParticleSpeed(s), 5.0) << "eta=" << eta;  // free fall over the scene is < 2 m/s
+        EXPECT_FALSE(s.particles().position.empty());
         std::printf("cup eta=%g Pa·s: max speed %.3f m/s after 0.2 s\n", eta, maxParticleSpeed(s));
     }
+}
+
+namespace {
+// VISCOSCOPE_FULL_VERIFICATION=1 (scripts/verify_physics.sh) runs the slow checks at full size;
+// CI runs the same code on coarser grids.
+bool fullVerification() {
+    const char* v = std::getenv("VISCOSCOPE_FULL_VERIFICATION");
+    return v && std::string(v) == "1";
+}
+
+double percentileRadius(const sim::Particles& p, const Vec3& axisPoint, double fraction) {
+    std::vector<double> r;
+    for (const Vec3& x : p.position) r.push_back(std::hypot(x.x() - axisPoint.x(), x.y() - axisPoint.y()));
+    std::sort(r.begin(), r.end());
+    return r.empty() ? 0 : r[static_cast<size_t>(fraction * (r.size() - 1))];
+}
+}  // namespace
+
+// 4. Huppert (1982): a fixed volume V spreading on the ground under gravity and viscosity has
+// front radius r_N = 0.894 (ρ g V³ t / 3η)^{1/8}. Fit r⁸ = A (t − t₀) (the virtual origin absorbs
+// the initial collapse), then the exponent of r against t − t₀ and the prefactor.
+TEST(Physics, HuppertViscousGravityCurrent) {
+    const bool full = fullVerification();
+    const double rho = 1400, eta = 10, g = 9.81, r0 = 0.02, h0 = 0.015;
+    const double volume = M_PI * r0 * r0 * h0;
+    json doc = baseScene(eta, full ? 96 : 48);
+    doc["domain"] = {{"min", {-0.06, -0.06, 0}}, {"max", {0.06, 0.06, 0.03}}, {"resolution", full ? 96 : 48}};
+    doc["solids"] = {{{"type", "ground"}, {"height", 0.0}}};
+    // Scenes have no cylindrical liquid source: seed a box, then trim its particles to a cylinder.
+    doc["liquids"].push_back({{"type", "box"}, {"min", {-r0, -r0, 0}}, {"max", {r0, r0, h0}}});
+    doc["material"] = {{"density", rho}, {"viscosity", eta}};
+    doc["fps"] = 2;
+    Scene scene = parseScene(doc, "huppert");
+    sim::Simulation s(scene);
+    sim::Particles& p = s.particles();
+    for (size_t i = p.position.size(); i-- > 0;)
+        if (std::hypot(p.position[i].x(), p.position[i].y()) > r0) {
+            p.position.erase(p.position.begin() + i);
+            p.velocity.erase(p.velocity.begin() + i);
+            p.affine.erase(p.affine.begin() + i);
+        }
+    std::vector<double> times, radii;
+    const int frames = full ? 40 : 18;
+    for (int f = 0; f < frames; ++f) {
+        s.advanceFrame();
+        if (s.time() >= 2.0) {
+            times.push_back(s.time());
+            radii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.99));
+        }
+    }
+    // Least squares r⁸ = A t + B, so t₀ = −B/A.
+    const size_t n = times.size();
+    double st = 0, sy = 0, stt = 0, sty = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double y = std::pow(radii[i], 8);
+        st += times[i], sy += y, stt += times[i] * times[i], sty += times[i] * y;
+    }
+    const double a = (n * sty - st * sy) / (n * stt - st * st), b = (sy - a * st) / n, t0 = -b / a;
+    double sx = 0, sl = 0, sxx = 0, sxl = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double x = std::log(times[i] - t0), l = std::log(radii[i]);
+        sx += x, sl += l, sxx += x * x, sxl += x * l;
+    }
+    const double exponent = (n * sxl - sx * sl) / (n * sxx - sx * sx);
+    const double prefactor = std::pow(a / (rho * g * std::pow(volume, 3) / (3 * eta)), 1.0 / 8);
+    std::printf("Huppert (%s, %d cells across): r(t_end)=%.4f m, t0=%.2f s, exponent %.4f (theory 0.125, error %.1f%%), "
+                "prefactor %.4f (theory 0.894, error %.1f%%)\n",
+                full ? "full" : "CI", s.grid().cells.x(), radii.back(), t0, exponent, 100 * (exponent / 0.125 - 1),
+                prefactor, 100 * (prefactor / 0.894 - 1));
+    EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.10) * 0.125);
+    EXPECT_NEAR(prefactor, 0.894, (full ? 0.05 : 0.15) * 0.894);
 }

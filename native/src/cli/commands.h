@@ -23,5 +23,8 @@ struct Command {
 };
 
 Command addSimulateCommand(CLI::App& app);
+Command addExtractCommand(CLI::App& app);
+Command addScoreCommand(CLI::App& app);
+Command addCameraCommand(CLI::App& app);
 
 }  // namespace viscoscope::cli

@@ -23,6 +23,9 @@ int main(int argc, char** argv) {
 
     const std::vector<cli::Command> commands{
         cli::addSimulateCommand(app),
+        cli::addExtractCommand(app),
+        cli::addScoreCommand(app),
+        cli::addCameraCommand(app),
     };
 
     try {

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <vector>
@@ -88,7 +89,9 @@ inline void interpolationStencil(const Grid& g, const Stagger& s, const Vec3& x,
     }
 }
 
-// Calls visit(index, weight, weightGradient) for the 8 lattice samples around x that exist.
+// Calls visit(index, weight, weightGradient) for the 8 lattice samples around x. Samples beyond a
+// non-periodic boundary are clamped onto it (constant extension): skipping them instead would leave
+// weight gradients that do not sum to zero, and APIC would read that as a spurious affine velocity.
 template <class Visit>
 void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&& visit) {
     Vec3i base;
@@ -98,7 +101,9 @@ void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&
         for (int dj = 0; dj < 2; ++dj)
             for (int di = 0; di < 2; ++di) {
                 Vec3i c = base + Vec3i(di, dj, dk);
-                if (!l.resolve(c)) continue;
+                for (int a = 0; a < 3; ++a)
+                    if (!l.periodic[a]) c[a] = std::clamp(c[a], 0, l.size[a] - 1);
+                l.resolve(c);
                 const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1],
                              wz = dk ? f[2] : 1 - f[2];
                 const Vec3 grad = Vec3((di ? 1 : -1) * wy * wz, (dj ? 1 : -1) * wx * wz,
@@ -108,12 +113,9 @@ void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&
 }
 
 inline double interpolate(const Grid& g, const Field& field, const Vec3& x) {
-    double sum = 0, weight = 0;
-    forEachStencilSample(g, field.lattice, x, [&](int i, double w, const Vec3&) {
-        sum += w * field[i];
-        weight += w;
-    });
-    return weight > 0 ? sum / weight : 0;
+    double sum = 0;
+    forEachStencilSample(g, field.lattice, x, [&](int i, double w, const Vec3&) { sum += w * field[i]; });
+    return sum;
 }
 
 }  // namespace viscoscope::sim

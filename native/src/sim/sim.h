@@ -9,6 +9,7 @@
 #include "sim/stokes_solver.h"
 
 #include <Eigen/Core>
+#include <openvdb/openvdb.h>
 
 #include <memory>
 #include <random>
@@ -41,6 +42,12 @@ struct FrameStats {
     double transferSeconds = 0, solveSeconds = 0, otherSeconds = 0;
     bool converged = true;
 };
+
+// A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
+// openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian LevelSetFilter passes. Voxel centres
+// sit at `origin` + (i + ½) voxelSize, so with voxelSize = Δx they coincide with the cell centres.
+openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
+                                         const Vec3& origin, int smoothingPasses);
 
 class Simulation {
 public:

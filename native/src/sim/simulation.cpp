@@ -4,6 +4,9 @@
 #include "sim/solid_field.h"
 
 #include <Eigen/Geometry>
+#include <openvdb/tools/GridOperators.h>
+#include <openvdb/tools/LevelSetFilter.h>
+#include <openvdb/tools/ParticlesToLevelSet.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -15,12 +18,15 @@ namespace viscoscope::sim {
 
 namespace {
 
-// Particles are spheres of this radius (in cells) when the liquid's distance field is built from
-// them; with 8 particles per cell it closes the gaps between neighbours in the bulk.
-constexpr double kParticleRadius = 0.6;
+// Particle radius and kernel reach (in cells) of the liquid's distance field (Zhu & Bridson 2005).
+// The radius is set so that a resting block of liquid measures its true volume (see the
+// hydrostatic test, which prints the initial volume error).
+constexpr double kParticleRadius = 0.55;
+constexpr double kKernelRadius = 2.0;
 // Particles are kept this far (in cells) outside solids after advection.
 constexpr double kSolidMargin = 0.05;
-// Smoothing passes over the liquid distance before its curvature is taken for surface tension.
+// The level set surface tension takes its curvature from: sphere radius (cells) and Gaussian passes.
+constexpr double kSurfaceParticleRadius = 0.75;
 constexpr int kCurvatureSmoothing = 2;
 
 using Clock = std::chrono::steady_clock;
@@ -31,28 +37,6 @@ double secondsSince(Clock::time_point t0) {
 // Smooth Heaviside of a signed distance over a half-cell of width h: the inside fraction of a
 // half-cell whose centre is at distance phi from a planar interface.
 double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
-
-// Averages each cell with its six neighbours (the centre counted twice), `passes` times: removes
-// the bumps a union of particle spheres leaves on a distance field before it is used.
-void smoothCellField(Field& phi, int passes) {
-    const Lattice& cells = phi.lattice;
-    for (int pass = 0; pass < passes; ++pass) {
-        Field smoothed = phi;
-        tbb::parallel_for(0, cells.count(), [&](int c) {
-            const Vec3i ijk = cells.coords(c);
-            double sum = phi[c] * 2;
-            int count = 2;
-            for (int a = 0; a < 3; ++a)
-                for (int d : {-1, 1})
-                    if (const int nb = cells.neighbour(ijk, a, d); nb >= 0) {
-                        sum += phi[nb];
-                        ++count;
-                    }
-            smoothed[c] = sum / count;
-        });
-        phi = std::move(smoothed);
-    }
-}
 
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
     if (const auto* box = std::get_if<LiquidBox>(&source))
@@ -128,6 +112,45 @@ Simulation::Simulation(const Scene& scene)
 
 Simulation::~Simulation() = default;
 
+namespace {
+// The particle list interface tools::ParticlesToLevelSet expects.
+class ParticleList {
+public:
+    using PosType = openvdb::Vec3R;
+    ParticleList(const std::vector<Vec3>& positions, double radius) : positions_(positions), radius_(radius) {}
+    size_t size() const { return positions_.size(); }
+    void getPos(size_t n, PosType& xyz) const { xyz = PosType(positions_[n].x(), positions_[n].y(), positions_[n].z()); }
+    void getPosRad(size_t n, PosType& xyz, openvdb::Real& radius) const {
+        getPos(n, xyz);
+        radius = radius_;
+    }
+
+private:
+    const std::vector<Vec3>& positions_;
+    double radius_;
+};
+}  // namespace
+
+openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
+                                         const Vec3& voxelCentre, int smoothingPasses) {
+    openvdb::initialize();
+    auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, 3.0);
+    auto transform = openvdb::math::Transform::createLinearTransform(voxelSize);
+    const Vec3 offset = voxelCentre + Vec3::Constant(0.5 * voxelSize);
+    transform->postTranslate(openvdb::Vec3d(offset.x(), offset.y(), offset.z()));
+    grid->setTransform(transform);
+    grid->setName("surface");
+    openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
+    raster.setRmin(0.5);  // the radius is fixed relative to the cell; never drop small particles
+    raster.rasterizeSpheres(ParticleList(positions, radius));
+    raster.finalize(true);
+    if (smoothingPasses > 0) {
+        openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
+        for (int i = 0; i < smoothingPasses; ++i) filter.gaussian(1);
+    }
+    return grid;
+}
+
 double Simulation::solidDistance(const Vec3& x) const { return solids_->distance(x); }
 
 void Simulation::seedParticles() {
@@ -201,23 +224,35 @@ void Simulation::transferToGrid() {
     }
 }
 
+// The liquid's signed distance at cell centres from the particles, after Zhu & Bridson 2005:
+// φ(x) = |x − x̄(x)| − r, with x̄ a kernel-weighted mean of nearby particles. Unlike a union of
+// spheres this gives flat surfaces where the particles lie flat, and no gaps inside the bulk.
 void Simulation::computeFractions() {
     const Lattice& cells = liquidPhi_.lattice;
-    const double dx = grid_.dx, radius = kParticleRadius * dx;
-    std::fill(liquidPhi_.values.begin(), liquidPhi_.values.end(), 3 * dx);
+    const double dx = grid_.dx, radius = kParticleRadius * dx, reach = kKernelRadius * dx;
+    std::vector<double> kernelSum(cells.count(), 0.0);
+    std::vector<Vec3> weightedPosition(cells.count(), Vec3::Zero());
+    const int span = static_cast<int>(std::ceil(kKernelRadius));
     for (const Vec3& x : particles_.position) {
         if (!x.allFinite()) continue;  // advanceFrame reports a blow-up; never index with it
         const Vec3i base = ((x - grid_.origin) / dx).array().floor().cast<int>();
-        for (int dk = -1; dk <= 1; ++dk)
-            for (int dj = -1; dj <= 1; ++dj)
-                for (int di = -1; di <= 1; ++di) {
+        for (int dk = -span; dk <= span; ++dk)
+            for (int dj = -span; dj <= span; ++dj)
+                for (int di = -span; di <= span; ++di) {
                     Vec3i c = base + Vec3i(di, dj, dk);
                     if (!cells.resolve(c)) continue;
+                    Vec3 offset = x - grid_.position(kCellCentre, base + Vec3i(di, dj, dk));
+                    const double s2 = offset.squaredNorm() / (reach * reach);
+                    if (s2 >= 1) continue;
+                    const double k = (1 - s2) * (1 - s2) * (1 - s2);
                     const int idx = cells.index(c[0], c[1], c[2]);
-                    const double d = (grid_.position(kCellCentre, c) - x).norm() - radius;
-                    liquidPhi_[idx] = std::min(liquidPhi_[idx], d);
+                    kernelSum[idx] += k;
+                    // Stored relative to the cell centre, so that periodic images average correctly.
+                    weightedPosition[idx] += k * offset;
                 }
     }
+    for (int c = 0; c < cells.count(); ++c)
+        liquidPhi_[c] = kernelSum[c] > 0 ? std::min((weightedPosition[c] / kernelSum[c]).norm() - radius, 3 * dx) : 3 * dx;
     // Extend the liquid one cell into solids so that cut cells at walls read as full of liquid;
     // the non-solid fraction then removes the part inside the wall.
     Field extended = liquidPhi_;
@@ -319,33 +354,23 @@ void Simulation::applySurfaceTension(double dt) {
     if (sigma <= 0) return;
     const Lattice& cells = liquidPhi_.lattice;
     const double dx = grid_.dx;
-    // Curvature differentiates twice: smooth further than the fractions need.
-    Field phi = liquidPhi_;
-    smoothCellField(phi, kCurvatureSmoothing);
-    auto value = [&](Vec3i c) { return cells.resolve(c) ? phi[cells.index(c[0], c[1], c[2])] : 3 * dx; };
+    // Curvature differentiates twice, so it is taken on OpenVDB's smoothed particle level set
+    // (cell-aligned voxels) rather than on the kernel-averaged distance used for the fractions.
+    auto levelSet = particleLevelSet(particles_.position, kSurfaceParticleRadius * dx, dx, grid_.origin, kCurvatureSmoothing);
+    const auto curvature = openvdb::tools::meanCurvature(*levelSet);
+    const auto curvatureAccess = curvature->getConstAccessor();
     Field pressureOutside(cells);
     for (int c = 0; c < cells.count(); ++c) {
-        if (std::abs(phi[c]) > 2 * dx || fractions_.cell[c] >= 1) continue;
+        if (fractions_.cell[c] >= 1) continue;
         const Vec3i ijk = cells.coords(c);
-        // κ = ∇·(∇φ/|∇φ|), differenced over the six half-cell faces.
-        double kappa = 0;
-        for (int a = 0; a < 3; ++a)
-            for (int d : {-1, 1}) {
-                const Vec3i nb = ijk + d * Vec3i::Unit(a);
-                Vec3 grad;
-                for (int b = 0; b < 3; ++b) {
-                    if (b == a) {
-                        grad[b] = d * (value(nb) - value(ijk)) / dx;
-                    } else {
-                        const Vec3i e = Vec3i::Unit(b);
-                        grad[b] = (value(ijk + e) - value(ijk - e) + value(nb + e) - value(nb - e)) / (4 * dx);
-                    }
-                }
-                const double len = grad.norm();
-                if (len > 1e-12) kappa += grad[a] / len / dx;
-            }
-        kappa = std::clamp(kappa, -2 / dx, 2 / dx);  // no more curved than the grid resolves
-        pressureOutside[c] = (1 - fractions_.cell[c]) * sigma * kappa;
+        bool nearLiquid = fractions_.cell[c] >= kMinWeight;
+        for (int a = 0; a < 3 && !nearLiquid; ++a)
+            for (int d : {-1, 1})
+                if (const int nb = cells.neighbour(ijk, a, d); nb >= 0 && fractions_.cell[nb] >= kMinWeight) nearLiquid = true;
+        if (!nearLiquid) continue;
+        // OpenVDB returns the mean curvature (κ1 + κ2)/2; the Laplace pressure needs κ1 + κ2.
+        const double kappa = 2.0 * curvatureAccess.getValue(openvdb::Coord(ijk[0], ijk[1], ijk[2]));
+        pressureOutside[c] = (1 - fractions_.cell[c]) * sigma * std::clamp(kappa, -2 / dx, 2 / dx);
     }
     for (int a = 0; a < 3; ++a) {
         Field& u = state_.velocity[a];

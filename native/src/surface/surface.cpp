@@ -2,8 +2,6 @@
 
 #include "scene/scene.h"
 
-#include <openvdb/tools/LevelSetFilter.h>
-#include <openvdb/tools/ParticlesToLevelSet.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <cstdint>
@@ -13,26 +11,6 @@
 namespace viscoscope::surface {
 
 namespace {
-
-// The particle list interface tools::ParticlesToLevelSet expects.
-class ParticleList {
-public:
-    using PosType = openvdb::Vec3R;
-    ParticleList(const std::vector<Eigen::Vector3d>& positions, double radius)
-        : positions_(positions), radius_(radius) {}
-    size_t size() const { return positions_.size(); }
-    void getPos(size_t n, PosType& xyz) const {
-        xyz = PosType(positions_[n].x(), positions_[n].y(), positions_[n].z());
-    }
-    void getPosRad(size_t n, PosType& xyz, openvdb::Real& radius) const {
-        getPos(n, xyz);
-        radius = radius_;
-    }
-
-private:
-    const std::vector<Eigen::Vector3d>& positions_;
-    double radius_;
-};
 
 openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
     auto transform = openvdb::math::Transform::createLinearTransform(grid.dx);
@@ -45,20 +23,8 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
 
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
                                        const SurfaceOptions& options) {
-    openvdb::initialize();
-    const double voxel = cellSize / options.voxelsPerCell;
-    auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxel, 3.0);
-    grid->setName("surface");
-    ParticleList list(positions, options.particleRadius * cellSize);
-    openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
-    raster.setRmin(0.5);  // our radius is fixed in cells; never drop particles for being small
-    raster.rasterizeSpheres(list);
-    raster.finalize(true);
-    if (options.smoothingPasses > 0) {
-        openvdb::tools::LevelSetFilter<openvdb::FloatGrid> filter(*grid);
-        for (int i = 0; i < options.smoothingPasses; ++i) filter.gaussian(1);
-    }
-    return grid;
+    return sim::particleLevelSet(positions, options.particleRadius * cellSize, cellSize / options.voxelsPerCell,
+                                 Eigen::Vector3d::Zero(), options.smoothingPasses);
 }
 
 void meshLevelSet(const openvdb::FloatGrid& levelSet, std::vector<openvdb::Vec3s>& points,

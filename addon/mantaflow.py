@@ -1,0 +1,133 @@
+"""Apply a Viscoscope fluid material to Blender's own Mantaflow liquid domain.
+
+Both of Mantaflow's viscosity paths are set (DESIGN.md, "What Mantaflow does"):
+- diffusion: use_diffusion, viscosity_base · 10^-viscosity_exponent = ν (Blender's preset convention);
+- variational: use_viscosity, viscosity_value = ν · 0.4 s / L², L the domain's longest side in metres.
+The variational value depends on the domain size, so it is recomputed when the domain is resized.
+"""
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import units
+
+NU_KEY = "viscoscope_nu"  # kinematic viscosity last applied to a domain, m²/s
+
+
+class DomainError(ValueError):
+    pass
+
+
+def fluid_modifier(obj):
+    if obj is None:
+        return None
+    for mod in obj.modifiers:
+        if mod.type == 'FLUID':
+            return mod
+    return None
+
+
+def domain_settings(obj):
+    mod = fluid_modifier(obj)
+    if mod is None or mod.fluid_type != 'DOMAIN':
+        raise DomainError("'%s' is not a Mantaflow fluid domain" % (obj.name if obj else "nothing"))
+    if mod.domain_settings.domain_type != 'LIQUID':
+        raise DomainError("'%s' is a gas domain; viscosity applies to liquid domains" % obj.name)
+    return mod.domain_settings
+
+
+def longest_side_m(obj, scale_length):
+    """The domain's longest side in metres, from its original mesh: obj.dimensions is the evaluated
+    geometry, which for a baked domain is the liquid surface, not the domain box."""
+    verts = obj.data.vertices
+    if not verts:
+        raise DomainError("domain '%s' has no vertices" % obj.name)
+    scale = obj.matrix_world.to_scale()
+    sides = []
+    for axis in range(3):
+        coords = [v.co[axis] for v in verts]
+        sides.append((max(coords) - min(coords)) * abs(scale[axis]))
+    return max(sides) * scale_length
+
+
+def apply_variational(obj, ds, nu, scale_length):
+    value = units.variational_viscosity_value(nu, longest_side_m(obj, scale_length))
+    clamped = min(value, 10.0)  # RNA hard max
+    ds.use_viscosity = True
+    ds.viscosity_value = clamped
+    return value, clamped
+
+
+def apply_fluid(obj, fluid, scale_length, material=None):
+    """Set the domain's viscosity, surface tension and material from a ViscoscopeFluid.
+
+    Returns a dict of what was set (and whether viscosity_value had to be clamped).
+    """
+    ds = domain_settings(obj)
+    nu = units.kinematic_viscosity(fluid.viscosity, fluid.density)
+    base, exponent = units.diffusion_base_exponent(nu)
+    ds.use_diffusion = True
+    ds.viscosity_base = base
+    ds.viscosity_exponent = exponent
+    ds.surface_tension = units.check_finite("surface tension", fluid.surface_tension, minimum=0.0)
+    value, clamped = apply_variational(obj, ds, nu, scale_length)
+    obj[NU_KEY] = nu
+    if material is not None:
+        if obj.data.materials:
+            obj.data.materials[0] = material
+        else:
+            obj.data.materials.append(material)
+    return {"nu": nu, "viscosity_base": base, "viscosity_exponent": exponent,
+            "viscosity_value": clamped, "clamped": value != clamped}
+
+
+def fluid_material(fluid, name):
+    """A Principled BSDF material for the fluid (created or updated)."""
+    mat = bpy.data.materials.get(name) or bpy.data.materials.new(name)
+    mat.use_nodes = True
+    bsdf = next((n for n in mat.node_tree.nodes if n.type == 'BSDF_PRINCIPLED'), None)
+    if bsdf is None:
+        bsdf = mat.node_tree.nodes.new("ShaderNodeBsdfPrincipled")
+    colour = tuple(fluid.color) + (1.0,)
+    bsdf.inputs["Base Color"].default_value = colour
+    bsdf.inputs["Roughness"].default_value = fluid.roughness
+    for socket_name in ("Transmission", "Transmission Weight"):  # 3.x / 4.x names
+        if socket_name in bsdf.inputs:
+            bsdf.inputs[socket_name].default_value = fluid.transmission
+            break
+    mat.diffuse_color = colour
+    mat["viscoscope_viscosity"] = fluid.viscosity
+    mat["viscoscope_density"] = fluid.density
+    return mat
+
+
+@persistent
+def _recompute_on_resize(scene, depsgraph):
+    """Keep viscosity_value consistent with ν when a domain is resized."""
+    scale_length = scene.unit_settings.scale_length
+    for update in depsgraph.updates:
+        if not (update.is_updated_transform or update.is_updated_geometry):
+            continue
+        obj = getattr(update.id, "original", None)
+        if not isinstance(obj, bpy.types.Object) or NU_KEY not in obj:
+            continue
+        mod = fluid_modifier(obj)
+        if mod is None or mod.fluid_type != 'DOMAIN':
+            continue
+        ds = mod.domain_settings
+        try:
+            value = min(units.variational_viscosity_value(obj[NU_KEY], longest_side_m(obj, scale_length)), 10.0)
+        except (units.UnitError, DomainError):
+            continue
+        if abs(ds.viscosity_value - value) > 1e-9 * max(1.0, value):
+            ds.viscosity_value = value
+
+
+def register():
+    if _recompute_on_resize not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_recompute_on_resize)
+
+
+def unregister():
+    if _recompute_on_resize in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_recompute_on_resize)

@@ -1,0 +1,157 @@
+"""Properties: scene.viscoscope (the workflow) and object.viscoscope (an object's role).
+
+Lengths and volumes are stored in Blender units (unit='LENGTH' / 'VOLUME', so the UI shows the
+scene's units); scene export converts them to SI once. Material values are SI already.
+"""
+
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
+
+from . import mantaflow
+
+ROLE_ITEMS = [
+    ('NONE', "None", "Not part of a Viscoscope scene"),
+    ('SOLID', "Solid", "Exported as a solid obstacle (triangle mesh)"),
+    ('CUP', "Cup", "Parametric cup with a hole in its bottom, exported as an analytic 'cup' solid"),
+    ('GROUND', "Ground", "Ground plane; its height is exported as a 'ground' solid"),
+    ('LIQUID', "Liquid", "Initial liquid: its bounding box is filled at frame 0"),
+    ('EMITTER', "Emitter", "Liquid emitter: a disc at the object's origin along its local +Z"),
+    ('DOMAIN', "Domain", "Simulation domain: its bounding box bounds the simulation"),
+]
+
+MODEL_ITEMS = [
+    ('NEWTONIAN', "Newtonian", "Constant viscosity η"),
+    ('POWER_LAW', "Power law", "η(γ̇) = η · γ̇^(n-1)"),
+    ('CARREAU', "Carreau", "η(γ̇) = η∞ + (η - η∞)(1 + (λγ̇)²)^((n-1)/2)"),
+    ('HERSCHEL_BULKLEY', "Herschel–Bulkley", "Yield stress τ0 with a power-law flow above it"),
+]
+
+
+def _cup_update(self, _context):
+    from . import cup_mesh
+    cup_mesh.rebuild_cup(self.id_data)
+
+
+class ViscoscopeObjectSettings(bpy.types.PropertyGroup):
+    role: EnumProperty(name="Role", items=ROLE_ITEMS, default='NONE')
+    cup_inner_radius: FloatProperty(name="Inner Radius", unit='LENGTH', default=0.043, min=1e-5, precision=4, update=_cup_update)
+    cup_height: FloatProperty(name="Inner Depth", unit='LENGTH', default=0.06, min=1e-5, precision=4, update=_cup_update)
+    cup_wall: FloatProperty(name="Wall", unit='LENGTH', default=0.003, min=1e-5, precision=4, update=_cup_update)
+    cup_bottom: FloatProperty(name="Bottom", unit='LENGTH', default=0.004, min=1e-5, precision=4, update=_cup_update)
+    cup_hole_radius: FloatProperty(name="Hole Radius", unit='LENGTH', default=0.009, min=0.0, precision=4, update=_cup_update)
+    emitter_radius: FloatProperty(name="Radius", unit='LENGTH', default=0.005, min=1e-6, precision=4)
+    emitter_flux: FloatProperty(name="Flux", description="Volume per second (scene units³/s)",
+                                default=1e-6, min=0.0, precision=8)
+    emitter_start: FloatProperty(name="Start", unit='TIME_ABSOLUTE', default=0.0, min=0.0)
+    emitter_end: FloatProperty(name="End", unit='TIME_ABSOLUTE', default=1.0, min=0.0)
+
+
+class ViscoscopeFluid(bpy.types.PropertyGroup):
+    """The fluid material: what a preset stores."""
+    description: StringProperty(name="Description", default="")
+    viscosity: FloatProperty(name="Viscosity η", description="Dynamic viscosity in Pa·s",
+                             default=8.0, min=0.0, soft_max=1000.0, precision=4)
+    density: FloatProperty(name="Density ρ", description="kg/m³", default=1400.0, min=1e-3, soft_max=20000.0)
+    surface_tension: FloatProperty(name="Surface Tension σ", description="N/m", default=0.0, min=0.0, precision=4)
+    slip_length: FloatProperty(name="Slip Length", description="Wall slip length in metres",
+                               default=0.0, min=0.0, precision=5)
+    model: EnumProperty(name="Model", items=MODEL_ITEMS, default='NEWTONIAN')
+    flow_index: FloatProperty(name="Flow Index n", default=1.0, min=1e-3, max=5.0)
+    eta_infinity: FloatProperty(name="η∞", description="Carreau infinite-shear viscosity, Pa·s", default=0.0, min=0.0)
+    relaxation_time: FloatProperty(name="λ", description="Carreau time constant, s", default=1.0, min=0.0)
+    yield_stress: FloatProperty(name="Yield Stress τ0", description="Pa", default=0.0, min=0.0)
+    color: FloatVectorProperty(name="Colour", subtype='COLOR', size=3, min=0.0, max=1.0,
+                               default=(0.8, 0.45, 0.05))
+    roughness: FloatProperty(name="Roughness", default=0.05, min=0.0, max=1.0)
+    transmission: FloatProperty(name="Transmission", default=0.6, min=0.0, max=1.0)
+
+
+class ViscoscopeJobStatus(bpy.types.PropertyGroup):
+    """Run-time state of one kind of engine job, shown in the panel."""
+    running: BoolProperty(default=False, options={'SKIP_SAVE'})
+    progress: FloatProperty(name="Progress", subtype='PERCENTAGE', min=0.0, max=100.0, default=0.0)
+    status: StringProperty(name="Status", default="")
+    error: StringProperty(name="Error", default="")
+    out_dir: StringProperty(name="Output", subtype='DIR_PATH', default="")
+    can_resume: BoolProperty(default=False)
+
+
+class ViscoscopeCameraPoint(bpy.types.PropertyGroup):
+    label: StringProperty(name="Label", default="")
+    world: FloatVectorProperty(name="World", subtype='TRANSLATION', unit='LENGTH', size=3)
+    image: FloatVectorProperty(name="Pixel", size=2, description="Pixel (u right, v down) on the clip")
+
+
+class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
+    work_dir: StringProperty(name="Work Folder", subtype='DIR_PATH', default="//viscoscope",
+                             description="Where scene, job and result files are written")
+    # Reference
+    video_path: StringProperty(name="Video", subtype='FILE_PATH', default="")
+    clip: PointerProperty(name="Clip", type=bpy.types.MovieClip)
+    # Camera
+    camera: PointerProperty(name="Camera", type=bpy.types.Object,
+                            poll=lambda self, obj: obj.type == 'CAMERA')
+    points: CollectionProperty(type=ViscoscopeCameraPoint)
+    points_index: IntProperty(default=0)
+    reprojection_error: FloatProperty(name="Reprojection Error", description="RMS, pixels", default=-1.0)
+    # Container
+    cup: PointerProperty(name="Cup", type=bpy.types.Object,
+                         poll=lambda self, obj: obj.viscoscope.role == 'CUP')
+    fill_volume: FloatProperty(name="Fluid Volume", unit='VOLUME', default=1.7e-4, min=0.0, precision=7)
+    # Silhouettes
+    background_frames: IntProperty(name="Background Frames", default=10, min=1,
+                                   description="Leading liquid-free frames that train the background model (MOG2)")
+    var_threshold: FloatProperty(name="Variance Threshold", default=16.0, min=0.0,
+                                 description="MOG2 variance threshold")
+    mask_threshold: IntProperty(name="Threshold", default=127, min=0, max=255,
+                                description="Mask = MOG2 output > threshold (shadows are 127)")
+    close_diameter: IntProperty(name="Closing", default=5, min=0, max=64, subtype='PIXEL',
+                                description="Morphological closing kernel diameter, pixels")
+    open_diameter: IntProperty(name="Opening", default=3, min=0, max=64, subtype='PIXEL',
+                               description="Morphological opening kernel diameter, pixels")
+    # Identify
+    eta_initial: FloatProperty(name="Initial η", description="Pa·s", default=5.0, min=1e-6, precision=4)
+    eta_spread: FloatProperty(name="Spread", description="Initial CMA-ES spread (factor of η, log space)",
+                              default=3.0, min=1.01, max=1000.0)
+    identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512)
+    max_generations: IntProperty(name="Max Generations", default=20, min=1, max=1000)
+    # Results
+    result_eta: FloatProperty(name="η", default=0.0, precision=4)
+    result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)
+    result_eta_high: FloatProperty(name="η high", default=0.0, precision=4)
+    # Fluid material
+    fluid: PointerProperty(type=ViscoscopeFluid)
+    # Transfer simulation
+    sim_resolution: IntProperty(name="Resolution", default=48, min=8, max=1024)
+    sim_frames: IntProperty(name="Frames", default=60, min=1)
+    sim_seed: IntProperty(name="Seed", default=1, min=0)
+    # Job states
+    identify_job: PointerProperty(type=ViscoscopeJobStatus)
+    simulate_job: PointerProperty(type=ViscoscopeJobStatus)
+    extract_job: PointerProperty(type=ViscoscopeJobStatus)
+
+
+classes = (
+    ViscoscopeObjectSettings,
+    ViscoscopeFluid,
+    ViscoscopeJobStatus,
+    ViscoscopeCameraPoint,
+    ViscoscopeSceneSettings,
+)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.viscoscope = PointerProperty(type=ViscoscopeSceneSettings)
+    bpy.types.Object.viscoscope = PointerProperty(type=ViscoscopeObjectSettings)
+    mantaflow.register()
+
+
+def unregister():
+    mantaflow.unregister()
+    del bpy.types.Object.viscoscope
+    del bpy.types.Scene.viscoscope
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

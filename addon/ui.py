@@ -1,0 +1,229 @@
+"""The "Viscoscope" tab of the 3D Viewport sidebar. Panels only lay out properties and operators."""
+
+import bpy
+
+from . import engine, prefs
+from .operators import runner
+from .presets import VISCOSCOPE_PT_fluid_presets
+
+
+# Names of the panels drawn since the add-on was enabled (the Xvfb screenshot test reads it).
+DRAWN = set()
+
+
+class _ViscoscopePanel:
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "Viscoscope"
+
+    def draw_header(self, _context):
+        DRAWN.add(type(self).__name__)
+
+
+def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
+    st = runner.status(context, kind)
+    active = runner.is_running(kind)
+    col = layout.column(align=True)
+    if active:
+        row = col.row(align=True)
+        if hasattr(row, "progress"):  # Blender 4.0+
+            row.progress(factor=st.progress / 100.0, text=st.status)
+        else:
+            row.prop(st, "progress", text=st.status, slider=True)
+        row.operator("viscoscope.cancel_job", text="", icon='CANCEL').kind = kind
+    else:
+        row = col.row(align=True)
+        row.scale_y = 1.4
+        row.operator(run_op, text=run_text, icon='PLAY')
+        if resume_op and st.can_resume:
+            row.operator(resume_op, text="Resume", icon='RECOVER_LAST')
+        if st.status:
+            col.label(text=st.status, icon='INFO')
+    if st.error and not active:
+        col.label(text=st.error, icon='ERROR')
+
+
+class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Reference"
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        try:
+            prefs.find_engine(context)
+        except engine.EngineError as exc:
+            # The sidebar is narrow: a short label here, the full reason in Preferences.
+            row = layout.row()
+            row.alert = True
+            row.label(text="Engine not found" if "not found" in str(exc) else "Engine not usable", icon='ERROR')
+            row.operator("preferences.addon_show", text="", icon='PREFERENCES').module = prefs.ADDON_ID
+        layout.operator("viscoscope.load_video", icon='FILE_MOVIE')
+        if vs.clip:
+            col = layout.column(align=True)
+            col.label(text="%s · %d frames · %.3g fps" % (vs.clip.name, vs.clip.frame_duration, vs.clip.fps))
+        layout.prop(vs, "work_dir")
+
+
+class VIEW3D_PT_viscoscope_camera(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Camera"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        layout.prop(vs, "camera")
+        row = layout.row()
+        row.template_list("VISCOSCOPE_UL_points", "", vs, "points", vs, "points_index", rows=3)
+        col = row.column(align=True)
+        col.operator("viscoscope.add_camera_point", text="", icon='ADD')
+        col.operator("viscoscope.remove_camera_point", text="", icon='REMOVE')
+        if 0 <= vs.points_index < len(vs.points):
+            point = vs.points[vs.points_index]
+            layout.prop(point, "world")
+            layout.prop(point, "image")
+        layout.operator("viscoscope.match_camera", icon='CON_CAMERASOLVER')
+        if vs.reprojection_error >= 0.0:
+            layout.label(text="Reprojection error: %.2f px" % vs.reprojection_error)
+        layout.operator("viscoscope.export_camera", icon='EXPORT')
+
+
+class VISCOSCOPE_UL_points(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active_data, _active_propname, _index):
+        layout.prop(item, "label", text="", emboss=False)
+        layout.label(text="(%.0f, %.0f)" % tuple(item.image))
+
+
+class VIEW3D_PT_viscoscope_container(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Container"
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        layout.operator("viscoscope.add_cup", icon='MESH_CYLINDER')
+        layout.prop(vs, "cup")
+        if vs.cup is not None:
+            cs = vs.cup.viscoscope
+            col = layout.column(align=True)
+            for attr in ("cup_inner_radius", "cup_height", "cup_wall", "cup_bottom", "cup_hole_radius"):
+                col.prop(cs, attr)
+        layout.prop(vs, "fill_volume")
+        layout.prop(vs.fluid, "density")
+        obj = context.active_object
+        if obj is not None:
+            box = layout.box()
+            box.label(text=obj.name, icon='OBJECT_DATA')
+            box.prop(obj.viscoscope, "role")
+            if obj.viscoscope.role == 'EMITTER':
+                col = box.column(align=True)
+                for attr in ("emitter_radius", "emitter_flux", "emitter_start", "emitter_end"):
+                    col.prop(obj.viscoscope, attr)
+
+
+class VIEW3D_PT_viscoscope_silhouettes(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Silhouettes"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        col = layout.column(align=True)
+        col.prop(vs, "background_frames")
+        col.prop(vs, "var_threshold")
+        col.prop(vs, "mask_threshold")
+        col.prop(vs, "close_diameter")
+        col.prop(vs, "open_diameter")
+        draw_job(layout, context, "extract", "viscoscope.preview_silhouettes", "Preview Silhouettes")
+
+
+class VIEW3D_PT_viscoscope_identify(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Identify"
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        col = layout.column(align=True)
+        col.prop(vs, "eta_initial")
+        col.prop(vs, "eta_spread")
+        col.prop(vs, "identify_resolution")
+        col.prop(vs, "max_generations")
+        draw_job(layout, context, "identify", "viscoscope.identify", "Identify Viscosity",
+                 resume_op="viscoscope.identify_resume")
+
+
+class VIEW3D_PT_viscoscope_results(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Results"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        if vs.result_eta > 0.0:
+            layout.label(text="η = %.4g Pa·s  [%.4g, %.4g]" % (vs.result_eta, vs.result_eta_low, vs.result_eta_high))
+        else:
+            layout.label(text="No identification yet")
+        for name in ("convergence.png", "landscape.png"):
+            img = bpy.data.images.get(name)
+            if img is not None and img.preview is not None:
+                layout.label(text=name[:-4].capitalize())
+                layout.template_icon(icon_value=img.preview.icon_id, scale=8.0)
+        layout.operator("viscoscope.load_fields", icon='VOLUME_DATA')
+
+
+class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Fluid Material"
+
+    def draw_header_preset(self, _context):
+        VISCOSCOPE_PT_fluid_presets.draw_panel_header(self.layout)
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        fluid = context.scene.viscoscope.fluid
+        col = layout.column(align=True)
+        col.prop(fluid, "description")
+        col.prop(fluid, "viscosity")
+        col.prop(fluid, "density")
+        col.prop(fluid, "surface_tension")
+        col.prop(fluid, "slip_length")
+        layout.prop(fluid, "model")
+        if fluid.model != 'NEWTONIAN':
+            col = layout.column(align=True)
+            col.prop(fluid, "flow_index")
+            if fluid.model == 'CARREAU':
+                col.prop(fluid, "eta_infinity")
+                col.prop(fluid, "relaxation_time")
+            if fluid.model == 'HERSCHEL_BULKLEY':
+                col.prop(fluid, "yield_stress")
+        col = layout.column(align=True)
+        col.prop(fluid, "color")
+        col.prop(fluid, "roughness")
+        col.prop(fluid, "transmission")
+        layout.operator("viscoscope.apply_to_domain", icon='MOD_FLUIDSIM')
+
+
+class VIEW3D_PT_viscoscope_transfer(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Transfer"
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        col = layout.column(align=True)
+        col.prop(vs, "sim_resolution")
+        col.prop(vs, "sim_frames")
+        col.prop(vs, "sim_seed")
+        layout.operator("viscoscope.export_scene", icon='EXPORT')
+        draw_job(layout, context, "simulate", "viscoscope.simulate", "Simulate with Viscoscope")
+
+
+classes = (
+    VISCOSCOPE_UL_points,
+    VIEW3D_PT_viscoscope_reference,
+    VIEW3D_PT_viscoscope_camera,
+    VIEW3D_PT_viscoscope_container,
+    VIEW3D_PT_viscoscope_silhouettes,
+    VIEW3D_PT_viscoscope_identify,
+    VIEW3D_PT_viscoscope_results,
+    VIEW3D_PT_viscoscope_fluid,
+    VIEW3D_PT_viscoscope_transfer,
+)

@@ -1,0 +1,335 @@
+// Reference silhouettes from video: MOG2 background subtraction (Zivkovic 2004), a threshold that
+// drops shadows, morphological closing then opening, and a static exclusion mask.
+#include "observe/observe.h"
+
+#include "observe/frame_source.h"
+#include "scene/scene.h"
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/background_segm.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+
+namespace viscoscope {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// The background model and the per-frame clean-up that turns its output into a binary mask.
+class SilhouetteExtractor {
+public:
+    explicit SilhouetteExtractor(const ExtractionOptions& options)
+        : options_(options),
+          subtractor_(cv::createBackgroundSubtractorMOG2(std::max(options.backgroundFrames, 1),
+                                                         options.varianceThreshold, /*detectShadows=*/true)),
+          closeKernel_(ellipticKernel(options.closeKernel)),
+          openKernel_(ellipticKernel(options.openKernel)) {
+        subtractor_->setVarMin(options.minimumVariance);
+    }
+
+    void learnFrame(const cv::Mat& frame) {
+        cv::Mat unused;
+        subtractor_->apply(frame, unused, -1);  // automatic rate: the running mean of the frames
+    }
+    void learnCleanPlate(const cv::Mat& plate) {
+        cv::Mat unused;
+        subtractor_->apply(plate, unused, 1.0);  // 1 = initialize the model from this image
+    }
+
+    // Learning is frozen (rate 0): a slow liquid would otherwise fade into the background.
+    cv::Mat1b extract(const cv::Mat& frame, const cv::Mat1b& excluded) {
+        cv::Mat raw;
+        subtractor_->apply(options_.compensateGain ? gainMatched(frame) : frame, raw, 0.0);
+        cv::Mat1b mask;
+        cv::threshold(raw, mask, options_.threshold, 255, cv::THRESH_BINARY);
+        if (!closeKernel_.empty()) cv::morphologyEx(mask, mask, cv::MORPH_CLOSE, closeKernel_);
+        if (!openKernel_.empty()) cv::morphologyEx(mask, mask, cv::MORPH_OPEN, openKernel_);
+        if (!excluded.empty()) mask.setTo(0, excluded);
+        return mask;
+    }
+
+private:
+    static cv::Mat ellipticKernel(int size) {
+        return size > 1 ? cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(size, size)) : cv::Mat();
+    }
+
+    // Scales each channel by the median background/frame ratio over a sparse grid of pixels. The
+    // median ignores the liquid as long as it covers less than half of the picture.
+    cv::Mat gainMatched(const cv::Mat& frame) {
+        if (background_.empty()) subtractor_->getBackgroundImage(background_);
+        constexpr int kStride = 7;
+        constexpr int kDarkest = 16;  // ratios of near-black pixels are mostly noise
+        cv::Scalar gain(1, 1, 1);
+        for (int channel = 0; channel < 3; ++channel) {
+            std::vector<float> ratios;
+            for (int row = kStride / 2; row < frame.rows; row += kStride)
+                for (int col = kStride / 2; col < frame.cols; col += kStride) {
+                    const int b = background_.at<cv::Vec3b>(row, col)[channel];
+                    const int f = frame.at<cv::Vec3b>(row, col)[channel];
+                    if (b >= kDarkest && f >= kDarkest) ratios.push_back(float(b) / float(f));
+                }
+            if (ratios.size() < 16) continue;
+            std::nth_element(ratios.begin(), ratios.begin() + ratios.size() / 2, ratios.end());
+            gain[channel] = ratios[ratios.size() / 2];
+        }
+        cv::Mat matched;
+        cv::multiply(frame, gain, matched);
+        return matched;
+    }
+
+    const ExtractionOptions& options_;
+    cv::Ptr<cv::BackgroundSubtractorMOG2> subtractor_;
+    cv::Mat closeKernel_, openKernel_;
+    cv::Mat background_;
+};
+
+// Writes everything under temporary names and renames into place on commit(); whatever was not
+// committed is removed, so a failed or cancelled run leaves no complete-looking output.
+class StagedOutput {
+public:
+    explicit StagedOutput(const fs::path& outDir) : outDir_(outDir) {
+        std::error_code error;
+        fs::create_directories(outDir, error);
+        if (error) throw InputError(outDir.string() + ": cannot create output folder (" + error.message() + ")");
+        // An older manifest next to half-rewritten masks would look complete: it goes first.
+        fs::remove(outDir / "manifest.json");
+        fs::remove_all(staged("masks"));
+        fs::create_directories(staged("masks"));
+    }
+    ~StagedOutput() {
+        if (committed_) return;
+        std::error_code ignored;
+        for (const char* name : {"masks", "exclude.png", "preview.png", "manifest.json"})
+            fs::remove_all(staged(name), ignored);
+    }
+    // The temporary path for `name`; the extension stays last so OpenCV picks the right codec.
+    fs::path staged(const std::string& name) const {
+        const fs::path path(name);
+        return outDir_ / (path.stem().string() + ".partial" + path.extension().string());
+    }
+    void commit(const std::vector<std::string>& names) {
+        for (const std::string& name : names) {  // the caller lists the manifest last
+            fs::remove_all(outDir_ / name);
+            fs::rename(staged(name), outDir_ / name);
+        }
+        committed_ = true;
+    }
+
+private:
+    fs::path outDir_;
+    bool committed_ = false;
+};
+
+// A few frames side by side with the mask tinted red, for a person to check the extraction.
+class PreviewStrip {
+public:
+    explicit PreviewStrip(std::vector<int> framesToShow) : framesToShow_(std::move(framesToShow)) {}
+
+    void offer(int frameIndex, const cv::Mat& frame, const cv::Mat1b& mask) {
+        if (std::find(framesToShow_.begin(), framesToShow_.end(), frameIndex) == framesToShow_.end()) return;
+        cv::Mat tinted = frame.clone();
+        tinted.setTo(cv::Scalar(0, 0, 255), mask);
+        cv::addWeighted(frame, 0.5, tinted, 0.5, 0, tinted);
+        const double scale = std::min(1.0, kHeight / double(frame.rows));
+        cv::resize(tinted, tinted, cv::Size(), scale, scale, cv::INTER_AREA);
+        cv::putText(tinted, std::to_string(frameIndex), {6, 20}, cv::FONT_HERSHEY_SIMPLEX, 0.6, {255, 255, 255}, 2);
+        tiles_.push_back(tinted);
+    }
+    void write(const fs::path& file) const {
+        cv::Mat strip;
+        if (!tiles_.empty()) cv::hconcat(tiles_, strip);
+        if (strip.empty() || !cv::imwrite(file.string(), strip))
+            throw std::runtime_error(file.string() + ": cannot write preview");
+    }
+
+private:
+    static constexpr double kHeight = 240;
+    std::vector<int> framesToShow_;
+    std::vector<cv::Mat> tiles_;
+};
+
+std::vector<int> plannedFrames(const ExtractionOptions& options, int frameCount) {
+    std::vector<int> frames;
+    const int last = options.last >= 0 ? options.last : frameCount - 1;
+    for (int f = options.first; f <= last; f += options.step) frames.push_back(f);
+    return frames;
+}
+
+std::vector<int> previewFrames(const std::vector<int>& planned) {
+    constexpr size_t kTiles = 4;
+    if (planned.size() <= kTiles) return planned;
+    std::vector<int> shown;
+    for (size_t i = 0; i < kTiles; ++i) shown.push_back(planned[i * (planned.size() - 1) / (kTiles - 1)]);
+    return shown;
+}
+
+void validateOptions(const ExtractionOptions& o) {
+    if (o.first < 0) throw InputError("--first must be ≥ 0");
+    if (o.last >= 0 && o.last < o.first) throw InputError("--last must be ≥ --first");
+    if (o.step < 1) throw InputError("--step must be ≥ 1");
+    if (!o.cleanPlate && o.backgroundFrames < 1) throw InputError("--background-frames must be ≥ 1 without a clean plate");
+    if (o.threshold < 0 || o.threshold > 254) throw InputError("--threshold must be in [0, 254]");
+    if (o.closeKernel < 0 || o.openKernel < 0) throw InputError("--close/--open kernel sizes must be ≥ 0");
+    if (!(o.varianceThreshold > 0)) throw InputError("--var-threshold must be > 0");
+    if (!(o.minimumVariance > 0)) throw InputError("--min-variance must be > 0");
+    if (o.fps && !(std::isfinite(*o.fps) && *o.fps > 0)) throw InputError("--fps must be > 0");
+}
+
+cv::Mat1b exclusionMask(const ExtractionOptions& options, cv::Size frameSize) {
+    if (!options.excludeMask && options.excludePolygons.empty()) return {};
+    cv::Mat1b excluded(frameSize, uchar(0));
+    if (options.excludeMask) {
+        const std::string file = options.excludeMask->string();
+        const cv::Mat image = cv::imread(file, cv::IMREAD_GRAYSCALE);
+        if (image.empty()) throw InputError(file + ": cannot read exclusion mask");
+        if (image.size() != frameSize)
+            throw InputError(file + ": exclusion mask is " + std::to_string(image.cols) + "x" +
+                             std::to_string(image.rows) + ", frames are " + std::to_string(frameSize.width) + "x" +
+                             std::to_string(frameSize.height));
+        excluded.setTo(255, image != 0);
+    }
+    for (const auto& polygon : options.excludePolygons) {
+        if (polygon.size() < 3) throw InputError("exclusion polygon needs at least 3 points");
+        std::vector<cv::Point> points;
+        for (const cv::Point2d& p : polygon) points.emplace_back(cvRound(p.x), cvRound(p.y));
+        cv::fillPoly(excluded, std::vector<std::vector<cv::Point>>{points}, cv::Scalar(255));
+    }
+    return excluded;
+}
+
+void learnBackground(SilhouetteExtractor& extractor, const fs::path& source, const ExtractionOptions& options,
+                     cv::Size frameSize) {
+    if (options.cleanPlate) {
+        const cv::Mat plate = cv::imread(options.cleanPlate->string(), cv::IMREAD_COLOR);
+        if (plate.empty()) throw InputError(options.cleanPlate->string() + ": cannot read clean plate");
+        if (plate.size() != frameSize) throw InputError(options.cleanPlate->string() + ": clean plate size differs from the frames'");
+        extractor.learnCleanPlate(plate);
+        return;
+    }
+    FrameSource frames(source, options.fps);
+    cv::Mat frame;
+    for (int i = 0; i < options.backgroundFrames; ++i) {
+        if (!frames.read(frame))
+            throw InputError(source.string() + ": has " + std::to_string(i) + " frames, fewer than the " +
+                             std::to_string(options.backgroundFrames) + " background frames asked for");
+        extractor.learnFrame(frame);
+    }
+}
+
+nlohmann::json parametersJson(const ExtractionOptions& o) {
+    nlohmann::json polygons = nlohmann::json::array();
+    for (const auto& polygon : o.excludePolygons) {
+        nlohmann::json points = nlohmann::json::array();
+        for (const cv::Point2d& p : polygon) points.push_back({p.x, p.y});
+        polygons.push_back(points);
+    }
+    return {{"first", o.first},
+            {"last", o.last},
+            {"step", o.step},
+            {"background", o.cleanPlate ? "clean_plate" : "leading_frames"},
+            {"background_frames", o.cleanPlate ? 0 : o.backgroundFrames},
+            {"clean_plate", o.cleanPlate ? fs::absolute(*o.cleanPlate).string() : ""},
+            {"mog2_variance_threshold", o.varianceThreshold},
+            {"mog2_minimum_variance", o.minimumVariance},
+            {"mog2_detect_shadows", true},
+            {"compensate_gain", o.compensateGain},
+            {"threshold", o.threshold},
+            {"close_kernel_px", o.closeKernel},
+            {"open_kernel_px", o.openKernel},
+            {"exclude_mask", o.excludeMask ? fs::absolute(*o.excludeMask).string() : ""},
+            {"exclude_polygons", polygons},
+            {"weights", o.weights}};
+}
+
+std::string maskName(int frameIndex) {
+    char name[32];
+    std::snprintf(name, sizeof name, "masks/mask_%05d.png", frameIndex);
+    return name;
+}
+
+// The source ran out before the range did: `framesRead` frames were all there was.
+void requireRangeInSource(const fs::path& source, const ExtractionOptions& options, const std::vector<int>& extracted,
+                          int framesRead) {
+    if (extracted.empty())
+        throw InputError(source.string() + ": no frame in the range --first " + std::to_string(options.first) +
+                         " (the source has " + std::to_string(framesRead) + " frames)");
+    if (options.last >= 0 && framesRead <= options.last)
+        throw InputError(source.string() + ": --last " + std::to_string(options.last) + " is past the last frame (" +
+                         std::to_string(framesRead - 1) + ")");
+}
+
+nlohmann::json manifestJson(const ReferenceManifest& m) {
+    return {{"format", "viscoscope.reference"}, {"version", 1}, {"source", m.source}, {"fps", m.fps},
+            {"width", m.width}, {"height", m.height}, {"frames", m.frames}, {"times_s", m.times},
+            {"weights", m.weights}, {"masks", m.maskFiles}, {"preview", "preview.png"},
+            {"exclude", m.excludeFile ? nlohmann::json(*m.excludeFile) : nlohmann::json()},
+            {"parameters", m.parameters}};
+}
+
+void writeJson(const nlohmann::json& doc, const fs::path& file) {
+    std::ofstream stream(file);
+    stream << doc.dump(2) << "\n";
+    if (!stream) throw std::runtime_error(file.string() + ": cannot write");
+}
+
+}  // namespace
+
+ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOptions& options, const fs::path& outDir,
+                                     const ProgressCallback& progress, const std::atomic<bool>* cancel) {
+    validateOptions(options);
+    parseFrameWeights(options.weights, {});  // reports syntax errors before any work
+    FrameSource frames(source, options.fps);
+    const cv::Size frameSize = frames.frameSize();
+    const cv::Mat1b excluded = exclusionMask(options, frameSize);
+    SilhouetteExtractor extractor(options);
+    learnBackground(extractor, source, options, frameSize);
+
+    StagedOutput output(outDir);
+    const std::vector<int> planned = plannedFrames(options, frames.frameCount());
+    PreviewStrip preview(previewFrames(planned));
+    ReferenceManifest manifest;
+    cv::Mat frame;
+    while (options.last < 0 || frames.nextIndex() <= options.last) {
+        if (cancel && *cancel) throw Cancelled("extraction cancelled");
+        const int index = frames.nextIndex();
+        const bool wanted = index >= options.first && (index - options.first) % options.step == 0;
+        if (!(wanted ? frames.read(frame) : frames.skip())) break;
+        if (!wanted) continue;
+        const cv::Mat1b mask = extractor.extract(frame, excluded);
+        const std::string name = maskName(index);
+        if (!cv::imwrite((output.staged("masks") / fs::path(name).filename()).string(), mask))
+            throw std::runtime_error(outDir.string() + ": cannot write " + name);
+        preview.offer(index, frame, mask);
+        manifest.frames.push_back(index);
+        manifest.times.push_back(index / frames.fps());
+        manifest.maskFiles.push_back(name);
+        if (progress) progress(static_cast<int>(manifest.frames.size()), static_cast<int>(planned.size()));
+    }
+    requireRangeInSource(source, options, manifest.frames, frames.nextIndex());
+
+    manifest.directory = outDir;
+    manifest.source = fs::absolute(source).string();
+    manifest.fps = frames.fps();
+    manifest.width = frameSize.width;
+    manifest.height = frameSize.height;
+    manifest.weights = parseFrameWeights(options.weights, manifest.frames);
+    manifest.parameters = parametersJson(options);
+    std::vector<std::string> outputs{"masks", "preview.png"};
+    if (!excluded.empty()) {
+        cv::imwrite(output.staged("exclude.png").string(), excluded);
+        manifest.excludeFile = "exclude.png";
+        outputs.push_back("exclude.png");
+    }
+    preview.write(output.staged("preview.png"));
+    writeJson(manifestJson(manifest), output.staged("manifest.json"));
+    outputs.push_back("manifest.json");
+    output.commit(outputs);
+    return manifest;
+}
+
+}  // namespace viscoscope

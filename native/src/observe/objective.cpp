@@ -1,0 +1,90 @@
+// The screen-space objective (Takahashi & Lin 2019, eq. 9), IoU, the difference picture and the
+// scalar-track terms.
+#include "observe/observe.h"
+
+#include "scene/scene.h"
+
+#include <opencv2/core.hpp>
+
+
+namespace viscoscope {
+
+namespace {
+
+void requireSameSize(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
+    if (simulated.size() != reference.size() || (!compared.empty() && compared.size() != reference.size()))
+        throw InputError("silhouettes differ in size: simulated " + std::to_string(simulated.cols) + "x" +
+                         std::to_string(simulated.rows) + ", reference " + std::to_string(reference.cols) + "x" +
+                         std::to_string(reference.rows) +
+                         (compared.empty() ? "" : ", exclusion " + std::to_string(compared.cols) + "x" +
+                                                      std::to_string(compared.rows)));
+}
+
+// Counts pixels where `predicate(simulatedInside, referenceInside)` holds, over compared pixels.
+template <typename Predicate>
+long long countPixels(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared,
+                      Predicate predicate) {
+    long long count = 0;
+    for (int row = 0; row < reference.rows; ++row) {
+        const uchar* g = simulated.ptr(row);
+        const uchar* gHat = reference.ptr(row);
+        const uchar* c = compared.empty() ? nullptr : compared.ptr(row);
+        for (int col = 0; col < reference.cols; ++col)
+            if ((c == nullptr || c[col] != 0) && predicate(g[col] != 0, gHat[col] != 0)) ++count;
+    }
+    return count;
+}
+
+}  // namespace
+
+double frameObjective(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
+    requireSameSize(simulated, reference, compared);
+    // Masks are binary, so (g − ĝ)² is 1 exactly where they disagree.
+    const long long disagreeing = countPixels(simulated, reference, compared, [](bool g, bool r) { return g != r; });
+    const double pixelCount = static_cast<double>(reference.total());
+    return disagreeing / (2.0 * pixelCount);
+}
+
+double intersectionOverUnion(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
+    requireSameSize(simulated, reference, compared);
+    const long long both = countPixels(simulated, reference, compared, [](bool g, bool r) { return g && r; });
+    const long long either = countPixels(simulated, reference, compared, [](bool g, bool r) { return g || r; });
+    return either == 0 ? 1.0 : static_cast<double>(both) / static_cast<double>(either);
+}
+
+cv::Mat3b differenceImage(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
+    requireSameSize(simulated, reference, compared);
+    const cv::Vec3b agreeInside(200, 200, 200), agreeOutside(40, 40, 40);
+    const cv::Vec3b falsePositive(0, 140, 255), falseNegative(255, 120, 0);  // BGR: orange, blue
+    cv::Mat3b picture(reference.size());
+    for (int row = 0; row < reference.rows; ++row) {
+        for (int col = 0; col < reference.cols; ++col) {
+            const bool g = simulated(row, col) != 0, r = reference(row, col) != 0;
+            cv::Vec3b colour = g == r ? (g ? agreeInside : agreeOutside) : (g ? falsePositive : falseNegative);
+            if (!compared.empty() && compared(row, col) == 0) colour /= 3;
+            picture(row, col) = colour;
+        }
+    }
+    return picture;
+}
+
+double normalizedSquaredError(const std::vector<double>& simulated, const std::vector<double>& reference) {
+    if (simulated.size() != reference.size())
+        throw InputError("scalar track: simulated and reference have " + std::to_string(simulated.size()) + " and " +
+                         std::to_string(reference.size()) + " samples");
+    double squaredError = 0, squaredReference = 0;
+    for (size_t i = 0; i < reference.size(); ++i) {
+        squaredError += (simulated[i] - reference[i]) * (simulated[i] - reference[i]);
+        squaredReference += reference[i] * reference[i];
+    }
+    if (!(squaredReference > 0)) throw InputError("scalar track: the reference track is all zero");
+    return squaredError / squaredReference;
+}
+
+double totalObjective(const std::vector<ObjectiveTerm>& terms) {
+    double total = 0;
+    for (const ObjectiveTerm& term : terms) total += term.weight * term.value;
+    return total;
+}
+
+}  // namespace viscoscope

@@ -1,0 +1,182 @@
+// The observe stage: reference silhouettes from video, simulated silhouettes from surfaces, and the
+// screen-space objective that compares them (Takahashi & Lin 2019, eq. 9).
+//
+// Masks are cv::Mat1b images with 255 inside the liquid and 0 outside, in the camera's pixel grid.
+#pragma once
+
+#include "camera/camera.h"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+#include <opencv2/core.hpp>
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace viscoscope {
+
+// A long operation stopped because its cancel flag was raised. The CLI maps it to exit code 3.
+class Cancelled : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Reference extraction (`viscoscope extract`)
+
+struct ExtractionOptions {
+    int first = 0;   // first source frame index to extract
+    int last = -1;   // last source frame index, inclusive; −1 = to the end
+    int step = 1;
+    std::optional<double> fps;  // overrides the video's own; required for image folders
+    // The background model: MOG2 (Zivkovic 2004) learned from the source's first
+    // `backgroundFrames` frames, which must show no liquid, or from a clean-plate image.
+    int backgroundFrames = 10;
+    std::optional<std::filesystem::path> cleanPlate;
+    double varianceThreshold = 16;  // MOG2's squared Mahalanobis distance for "foreground"
+    // The floor on each pixel's learned variance (grey levels²). Compressed video re-quantizes a
+    // static scene differently from frame to frame once anything moves, so the few learning frames
+    // understate the noise; OpenCV's default floor of 4 turns those artifacts into speckles.
+    double minimumVariance = 16;
+    // Phones drift in exposure; each frame's gain per channel is matched to the background
+    // (median ratio) so that a global brightness change is not taken for liquid.
+    bool compensateGain = true;
+    int threshold = 127;  // MOG2 marks shadows 127 and foreground 255; mask = value > threshold
+    int closeKernel = 5;  // morphological closing, then opening; elliptic kernel diameters in px
+    int openKernel = 3;
+    // Static exclusion C (pixels not compared), e.g. the container: a PNG with nonzero = excluded,
+    // and/or polygons in pixel coordinates. Masks are zeroed there too, so tracks ignore it.
+    std::optional<std::filesystem::path> excludeMask;
+    std::vector<std::vector<cv::Point2d>> excludePolygons;
+    // Frame weights ω: "" (all 1), ranges of source frame indices "0-10:1,11-20:0" (frames not
+    // named get 1), or one value per extracted frame "1,1,0,1".
+    std::string weights;
+};
+
+// What `extract` wrote, as read back from manifest.json.
+struct ReferenceManifest {
+    std::filesystem::path directory;
+    std::string source;
+    double fps = 0;
+    int width = 0, height = 0;
+    std::vector<int> frames;      // source frame indices
+    std::vector<double> times;    // seconds since source frame 0
+    std::vector<double> weights;  // ω_f
+    std::vector<std::string> maskFiles;  // relative to `directory`
+    std::optional<std::string> excludeFile;  // 255 = excluded from the objective
+    nlohmann::json parameters;
+
+    cv::Mat1b mask(size_t i) const;  // throws InputError on a missing or wrongly sized mask
+    cv::Mat1b comparedPixels() const;  // C_f: 255 where pixels count, 0 where excluded; empty = all
+};
+
+using ProgressCallback = std::function<void(int done, int total)>;
+
+// Reads `source` (a video file any FFmpeg build reads, rotated as its metadata says, or a folder
+// of numbered images) and writes outDir/masks/mask_%05d.png, outDir/exclude.png (when there is
+// an exclusion), outDir/preview.png and, last, outDir/manifest.json. Outputs go to temporary
+// names first, so a failed or cancelled run never leaves a complete-looking manifest.
+// Throws InputError for bad input and Cancelled when *cancel becomes true.
+ReferenceManifest extractSilhouettes(const std::filesystem::path& source, const ExtractionOptions& options,
+                                     const std::filesystem::path& outDir, const ProgressCallback& progress = {},
+                                     const std::atomic<bool>* cancel = nullptr);
+
+ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
+
+// ω for each extracted frame from an ExtractionOptions::weights string. Throws InputError.
+std::vector<double> parseFrameWeights(const std::string& spec, const std::vector<int>& frames);
+
+// ---------------------------------------------------------------------------------------------
+// Scalar tracks
+
+// A scalar observable over time; `values[c][i]` is column `columns[c]` at `time[i]`.
+struct ScalarTrack {
+    std::vector<std::string> columns;
+    std::vector<double> time;  // s, non-decreasing
+    std::vector<std::vector<double>> values;
+};
+
+// A measured CSV: a header whose first column is the time in seconds ("time_s"), then value
+// columns in SI units, one row per sample (see shared/data/measured/README.md). Throws InputError
+// naming the file and line.
+ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file);
+void saveScalarTrackCsv(const ScalarTrack& track, const std::filesystem::path& file);
+
+// An image ray: from `origin` (px) along `direction` (px, any length).
+struct ImageRay {
+    Eigen::Vector2d origin, direction;
+};
+// Distance in px from the ray's origin to the farthest mask pixel on the ray (0 when none): the
+// leading edge of a front that advances along the ray.
+double frontAlongRay(const cv::Mat1b& mask, const ImageRay& ray);
+// Silhouette area in px.
+double silhouetteArea(const cv::Mat1b& mask);
+// Columns "front_px" (when a ray is given) and "area_px" for every frame of the manifest.
+ScalarTrack tracksFromMasks(const ReferenceManifest& reference, const std::optional<ImageRay>& ray);
+
+// Linear interpolation of column `column` at `times` (clamped at both ends).
+std::vector<double> sampleTrack(const ScalarTrack& track, size_t column, const std::vector<double>& times);
+// Σ(a − b)² / Σ b², with `reference` = b. Throws InputError on a size mismatch or an all-zero b.
+double normalizedSquaredError(const std::vector<double>& simulated, const std::vector<double>& reference);
+
+// ---------------------------------------------------------------------------------------------
+// Simulated silhouettes
+
+// Fills every projected triangle into one mask (their union), sampling at pixel centres.
+// Triangles crossing the camera's near plane are clipped against it; geometry behind is ignored.
+// Triangle edges stay straight in the image: with lens distortion, keep triangles small.
+cv::Mat1b rasterizeMesh(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles,
+                        const PinholeCamera& camera);
+
+struct TriangleMesh {
+    std::vector<Eigen::Vector3d> vertices;  // world, metres
+    std::vector<Eigen::Vector3i> triangles;
+};
+// The zero level set (negative inside) as triangles, via openvdb::tools::volumeToMesh.
+TriangleMesh meshFromLevelSet(const openvdb::FloatGrid& levelSet);
+// OBJ or PLY (ASCII or binary little-endian); polygons are fan-triangulated. Throws InputError.
+TriangleMesh loadMesh(const std::filesystem::path& file);
+
+cv::Mat1b silhouetteFromLevelSet(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
+// The fast approximate path: splats each particle as its projected disc, then closes the mask
+// with a kernel of `closeKernel` px to fill gaps between discs.
+cv::Mat1b silhouetteFromParticles(const std::vector<Eigen::Vector3d>& points, double radius,
+                                  const PinholeCamera& camera, int closeKernel = 3);
+// The fast path for a level set: splats the inner band voxels (−h ≤ φ ≤ 0) as discs of radius h/2
+// and closes the gaps. Any ray through a closed surface crosses that band, so it covers the
+// silhouette without meshing. (h/2 rather than the half diagonal: that bloats the outline by about
+// a third of a voxel and lowers the IoU against the exact path from 0.99 to 0.97.)
+cv::Mat1b silhouetteFromLevelSetFast(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
+// World positions of the level set's inner band voxels (what the fast path splats).
+std::vector<Eigen::Vector3d> innerBandPoints(const openvdb::FloatGrid& levelSet);
+
+// ---------------------------------------------------------------------------------------------
+// The objective
+
+// E_f = (1/2M) Σ_pixels C_f (g_f − ĝ_f)², masks read as 0/1, M the pixel count. An empty
+// `compared` means C_f = 1 everywhere.
+double frameObjective(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared = {});
+// |g ∩ ĝ| / |g ∪ ĝ| over compared pixels; 1 when both are empty.
+double intersectionOverUnion(const cv::Mat1b& simulated, const cv::Mat1b& reference,
+                             const cv::Mat1b& compared = {});
+// A picture of the difference: agreement in grey, false positives (simulated only) in orange,
+// false negatives (reference only) in blue, excluded pixels darkened.
+cv::Mat3b differenceImage(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared = {});
+
+// The total objective is a weighted sum of normalized terms:
+//   E_total = w_silhouette · Σ_f ω_f E_f  +  Σ_k w_k · Σ_i (a_k,i − b_k,i)² / Σ_i b_k,i²
+// where k runs over scalar tracks (simulated a, reference b sampled at the reference times).
+struct ObjectiveTerm {
+    std::string name;
+    double weight = 1;
+    double value = 0;
+};
+double totalObjective(const std::vector<ObjectiveTerm>& terms);
+
+}  // namespace viscoscope

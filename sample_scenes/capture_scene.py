@@ -1,0 +1,91 @@
+"""The capture scene: a cup with a hole in its bottom standing above the ground, a camera looking at
+it, the honey fluid material, ready for the workflow (Reference → Camera → Identify).
+
+    blender -b --factory-startup --python sample_scenes/capture_scene.py -- --out DIR [--clip]
+writes DIR/capture.blend. With --clip (needs the engine: VISCOSCOPE_ENGINE, preferences or
+build/bin), it also simulates the pour with the Viscoscope engine at a resolution identification
+does not use, renders it with Cycles into DIR/reference.mp4 and loads that as the reference video,
+so a new user can click through the whole workflow on embedded data.
+"""
+
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import _common  # noqa: E402
+
+
+def build():
+    import bpy
+    scene = _common.empty_scene()
+    from viscoscope.operators import container
+    cup, ground, domain = container.add_cup(bpy.context, (0.0, 0.0, 0.0))
+    cup.data.materials.append(_common.simple_material("Cup", (0.85, 0.85, 0.9), 0.3))
+    ground.data.materials.append(_common.simple_material("Table", (0.35, 0.3, 0.25), 0.7))
+    scene.viscoscope.fill_volume = 1.7e-4
+    _common.set_fluid(scene, "Honey (capture)", 8.0, 1400.0, 0.0, (0.85, 0.5, 0.08))
+    scene.viscoscope.sim_resolution = 32
+    scene.viscoscope.sim_frames = 24
+    _common.add_camera(scene, (0.0, -0.45, 0.12), (0.0, 0.0, 0.07), lens=50)
+    _common.add_lights(scene, (0, 0, 0.06), scale=0.5)
+    scene.render.resolution_x, scene.render.resolution_y = 1280, 720
+    scene.render.fps = 30
+    scene.frame_start, scene.frame_end = 1, 24
+    # Four reference points for "Match camera from points": the cup's rim and the base.
+    for label, world in (("rim left", (-0.046, 0.0, 0.114)), ("rim right", (0.046, 0.0, 0.114)),
+                         ("base left", (-0.046, 0.0, 0.05)), ("base right", (0.046, 0.0, 0.05))):
+        p = scene.viscoscope.points.add()
+        p.label, p.world = label, world
+    # Their pixels, as the artist would mark them on footage shot with this camera.
+    from viscoscope import camera_math, scene_export
+    bpy.context.view_layer.update()
+    cv = camera_math.opencv_camera(scene_export.camera_dict(scene.camera, scene))
+    for p in scene.viscoscope.points:
+        p.image = camera_math.project(cv, list(p.world))
+    return scene
+
+
+def render_reference_clip(scene, out_dir, samples=4, resolution=48):
+    """Simulate (engine), import the surface, render a small mp4 and load it as the reference."""
+    import bpy
+    from viscoscope.operators import reference
+    vs = scene.viscoscope
+    vs.work_dir = os.path.join(out_dir, "reference_sim")
+    vs.sim_resolution = resolution  # identification runs at 32: the reference must not share its grid
+    result = bpy.ops.viscoscope.simulate('EXEC_DEFAULT')
+    if result != {'FINISHED'}:
+        raise SystemExit("error: the reference simulation failed: %s" % vs.simulate_job.error)
+    liquid = bpy.data.objects["Viscoscope Liquid"]
+    scene.render.engine = 'CYCLES'
+    scene.cycles.samples = samples
+    scene.cycles.use_denoising = False
+    scene.render.resolution_x, scene.render.resolution_y = 320, 180
+    scene.render.image_settings.file_format = 'FFMPEG'
+    scene.render.ffmpeg.format = 'MPEG4'
+    scene.render.ffmpeg.codec = 'H264'
+    scene.render.ffmpeg.constant_rate_factor = 'HIGH'
+    clip_path = os.path.join(out_dir, "reference.mp4")
+    scene.render.filepath = clip_path
+    scene.frame_end = scene.frame_start + vs.sim_frames
+    bpy.ops.render.render(animation=True)
+    # The reference is footage now: drop the simulated liquid, keep the clip.
+    volume = liquid.modifiers[0].object
+    bpy.data.objects.remove(liquid)
+    bpy.data.objects.remove(volume)
+    vs.work_dir = "//viscoscope"
+    reference.load_reference(bpy.context, clip_path)
+    return clip_path
+
+
+if __name__ == "__main__":
+    import sys as _sys
+    argv = _sys.argv[_sys.argv.index("--") + 1:] if "--" in _sys.argv else []
+    with_clip = "--clip" in argv
+    if with_clip:
+        argv.remove("--clip")
+        _sys.argv = _sys.argv[:_sys.argv.index("--") + 1] + argv
+    args = _common.parse_args()
+    scene = build()
+    if with_clip:
+        render_reference_clip(scene, os.path.abspath(args.out), samples=args.samples)
+    _common.save(os.path.join(args.out, "capture.blend"))

@@ -1,0 +1,167 @@
+"""Fluid presets: save → load → apply to a Mantaflow domain (RNA read back), and no code injection."""
+
+import ast
+import glob
+import os
+
+import bpy
+import pytest
+
+from viscoscope import mantaflow, presets, units
+
+
+def _domain(ctx, size=0.2):
+    bpy.ops.mesh.primitive_cube_add(size=size, location=(0, 0, size / 2))
+    obj = ctx.active_object
+    obj.name = "Viscoscope test domain"
+    bpy.ops.object.modifier_add(type='FLUID')
+    mod = obj.modifiers[-1]
+    mod.fluid_type = 'DOMAIN'
+    mod.domain_settings.domain_type = 'LIQUID'
+    return obj, mod.domain_settings
+
+
+def _preset_files():
+    return set(glob.glob(os.path.join(presets.user_preset_dir(), "*.py")))
+
+
+def test_presets_live_in_the_user_config_not_the_addon(addon):
+    folder = presets.user_preset_dir()
+    assert folder.startswith(os.environ["BLENDER_USER_SCRIPTS"])
+    assert folder.endswith(os.path.join("presets", "viscoscope", "fluid"))
+    assert not folder.startswith(os.path.dirname(presets.__file__))
+
+
+def test_kinematic_conversion_is_eta_over_rho():
+    assert units.kinematic_viscosity(2.8, 1400.0) == pytest.approx(2e-3)
+    assert units.diffusion_base_exponent(2e-3) == (pytest.approx(2.0), 3)   # Blender's Honey.py
+    assert units.diffusion_base_exponent(1e-6) == (pytest.approx(1.0), 6)   # water
+    base, exp = units.diffusion_base_exponent(5.714285714e-3)
+    assert base * 10 ** -exp == pytest.approx(5.714285714e-3)
+    assert units.variational_viscosity_value(2e-3, 0.2) == pytest.approx(2e-3 * 0.4 / 0.04)
+    with pytest.raises(units.UnitError, match="density must be > 0"):
+        units.kinematic_viscosity(1.0, 0.0)
+    with pytest.raises(units.UnitError, match="viscosity must be a finite number"):
+        units.kinematic_viscosity(float("nan"), 1000.0)
+
+
+def test_save_load_apply_to_mantaflow(ctx):
+    fluid = ctx.scene.viscoscope.fluid
+    fluid.description = "Clover honey, 20 °C"
+    fluid.viscosity, fluid.density, fluid.surface_tension = 8.0, 1400.0, 0.07
+    fluid.model = 'CARREAU'
+    fluid.flow_index = 0.8
+    fluid.color = (0.9, 0.5, 0.1)
+    before = _preset_files()
+    assert bpy.ops.viscoscope.fluid_preset_add(name="Clover Honey") == {'FINISHED'}
+    new = _preset_files() - before
+    assert len(new) == 1
+    path = new.pop()
+    assert os.path.basename(path) == "Clover_Honey.py"
+
+    ctx.scene.property_unset("viscoscope")
+    assert fluid.viscosity == 8.0 and fluid.model == 'NEWTONIAN'  # defaults, then load:
+    ctx.scene.viscoscope.fluid.viscosity = 1.0
+    assert bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets") == {'FINISHED'}
+    fluid = ctx.scene.viscoscope.fluid
+    assert fluid.viscosity == pytest.approx(8.0) and fluid.density == pytest.approx(1400.0)
+    assert fluid.model == 'CARREAU' and fluid.flow_index == pytest.approx(0.8)
+    assert tuple(fluid.color) == pytest.approx((0.9, 0.5, 0.1))
+    assert fluid.description == "Clover honey, 20 °C"
+
+    obj, ds = _domain(ctx, size=0.2)
+    assert bpy.ops.viscoscope.apply_to_domain() == {'FINISHED'}
+    nu = 8.0 / 1400.0
+    assert ds.use_diffusion and ds.use_viscosity
+    assert ds.viscosity_base * 10.0 ** -ds.viscosity_exponent == pytest.approx(nu, rel=1e-6)
+    assert ds.viscosity_exponent == 3 and ds.viscosity_base == pytest.approx(5.7142857, rel=1e-6)
+    assert ds.viscosity_value == pytest.approx(nu * 0.4 / 0.2 ** 2, rel=1e-6)
+    assert ds.surface_tension == pytest.approx(0.07)
+    assert obj.active_material is not None
+    assert tuple(obj.active_material.diffuse_color)[:3] == pytest.approx((0.9, 0.5, 0.1))
+
+    # Resizing the domain recomputes viscosity_value (the same ν in a larger domain).
+    obj.scale = (2.0, 2.0, 2.0)
+    ctx.view_layer.update()
+    assert ds.viscosity_value == pytest.approx(nu * 0.4 / 0.4 ** 2, rel=1e-6)
+
+
+def test_domain_size_comes_from_the_domain_box_not_the_evaluated_liquid(ctx):
+    """A baked domain evaluates to the liquid surface; L must still be the domain box."""
+    obj, ds = _domain(ctx, size=0.2)
+    obj.scale = (1.0, 1.5, 1.0)
+    ctx.view_layer.update()
+    assert mantaflow.longest_side_m(obj, 1.0) == pytest.approx(0.3)
+    assert mantaflow.longest_side_m(obj, 0.01) == pytest.approx(0.003)
+
+
+def test_apply_respects_unit_scale(ctx):
+    ctx.scene.unit_settings.scale_length = 0.01
+    obj, ds = _domain(ctx, size=20.0)  # 20 cm
+    ctx.scene.viscoscope.fluid.viscosity = 2.8
+    assert bpy.ops.viscoscope.apply_to_domain() == {'FINISHED'}
+    assert ds.viscosity_base == pytest.approx(2.0) and ds.viscosity_exponent == 3
+    assert ds.viscosity_value == pytest.approx(2e-3 * 0.4 / 0.2 ** 2, rel=1e-6)
+
+
+def test_apply_needs_a_liquid_domain(ctx):
+    bpy.ops.mesh.primitive_cube_add()
+    ctx.active_object.name = "Viscoscope plain cube"
+    assert not bpy.ops.viscoscope.apply_to_domain.poll()
+    bpy.ops.object.modifier_add(type='FLUID')
+    ctx.active_object.modifiers[-1].fluid_type = 'DOMAIN'
+    ctx.active_object.modifiers[-1].domain_settings.domain_type = 'GAS'
+    with pytest.raises(mantaflow.DomainError, match="gas domain"):
+        mantaflow.apply_fluid(ctx.active_object, ctx.scene.viscoscope.fluid, 1.0)
+
+
+HOSTILE = [
+    'x"; __import__("os").system("touch {mark}"); "',
+    "x'\n__import__('os').system('touch {mark}')\n#",
+    "__import__('os').system('touch {mark}')",
+    "\\\" ; import os; os.system('touch {mark}') #",
+]
+
+
+def _check_preset_file_is_data(path):
+    """A preset file may only import bpy, bind the fluid and assign literals."""
+    tree = ast.parse(open(path, encoding="utf-8").read())
+    for node in tree.body:
+        if isinstance(node, ast.Import):
+            assert [a.name for a in node.names] == ["bpy"]
+            continue
+        assert isinstance(node, ast.Assign), ast.dump(node)
+        target = ast.unparse(node.targets[0])
+        if target == "fluid":
+            assert ast.unparse(node.value) == "bpy.context.scene.viscoscope.fluid"
+        else:
+            assert target.startswith("fluid.")
+            ast.literal_eval(node.value)  # raises for anything that is not a literal
+
+
+@pytest.mark.parametrize("template", HOSTILE)
+def test_hostile_names_and_values_run_no_code(ctx, tmp_path, template):
+    mark_name = tmp_path / "pwned_name"
+    mark_value = tmp_path / "pwned_value"
+    name = template.format(mark=mark_name)
+    value = template.format(mark=mark_value)
+    ctx.scene.viscoscope.fluid.description = value
+    before = _preset_files()
+    assert bpy.ops.viscoscope.fluid_preset_add(name=name) == {'FINISHED'}
+    new = _preset_files() - before
+    assert len(new) == 1
+    path = new.pop()
+    base = os.path.basename(path)[:-3]
+    assert base and all(c.isalnum() or c in "_-" for c in base), base
+    _check_preset_file_is_data(path)
+    ctx.scene.viscoscope.fluid.description = ""
+    assert bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets") == {'FINISHED'}
+    assert ctx.scene.viscoscope.fluid.description == value  # round-trips as data
+    assert not mark_name.exists() and not mark_value.exists()
+    os.remove(path)
+
+
+def test_preset_menu_lists_saved_presets(ctx):
+    assert bpy.ops.viscoscope.fluid_preset_add(name="Menu Check") == {'FINISHED'}
+    paths = bpy.utils.preset_paths(presets.PRESET_SUBDIR)
+    assert any(os.path.isfile(os.path.join(p, "Menu_Check.py")) for p in paths)

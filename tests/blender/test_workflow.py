@@ -1,0 +1,229 @@
+"""The capture workflow's operators: reference video, camera match, identify (cancel + resume), results.
+
+Identification does not exist in the engine yet, so these run against the stand-in engine, which
+speaks the same progress / exit-code / checkpoint contract."""
+
+import json
+import math
+import os
+import shutil
+import subprocess
+
+import bpy
+import pytest
+
+from viscoscope import camera_math, scene_export
+from viscoscope.operators import container, reference, runner
+
+
+@pytest.fixture(scope="module")
+def clip_path(tmp_path_factory):
+    """A 12-frame 160x120 video at 25 fps (ffmpeg's test pattern)."""
+    if shutil.which("ffmpeg") is None:
+        pytest.skip("ffmpeg is not installed")
+    path = tmp_path_factory.mktemp("video") / "pour.mp4"
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-f", "lavfi", "-i", "testsrc=size=160x120:rate=25",
+                    "-frames:v", "12", "-pix_fmt", "yuv420p", str(path)], check=True)
+    return str(path)
+
+
+def _capture(ctx):
+    container.add_cup(ctx, (0, 0, 0))
+    bpy.ops.object.camera_add(location=(0, -0.45, 0.12), rotation=(math.radians(83), 0, 0))
+    ctx.active_object.name = "Viscoscope camera"
+    ctx.scene.camera = ctx.active_object
+    ctx.scene.viscoscope.camera = ctx.active_object
+    return ctx.active_object
+
+
+def test_load_video_matches_scene_and_sets_background(ctx, clip_path):
+    cam = _capture(ctx)
+    ctx.scene.render.fps = 24
+    assert bpy.ops.viscoscope.load_video(filepath=clip_path) == {'FINISHED'}
+    vs = ctx.scene.viscoscope
+    assert vs.clip is not None and ctx.scene.active_clip == vs.clip
+    assert (ctx.scene.frame_start, ctx.scene.frame_end) == (1, 12)
+    assert ctx.scene.render.fps / ctx.scene.render.fps_base == pytest.approx(25.0)
+    assert (ctx.scene.render.resolution_x, ctx.scene.render.resolution_y) == (160, 120)
+    assert cam.data.show_background_images
+    assert cam.data.background_images[0].source == 'MOVIE_CLIP' and cam.data.background_images[0].clip == vs.clip
+
+
+@pytest.mark.parametrize("path, message", [("", "No video chosen"), ("/nonexistent/pour.mp4", "Video not found")])
+def test_load_video_errors(ctx, path, message):
+    with pytest.raises(ValueError, match=message):
+        reference.load_reference(ctx, path)
+
+
+def test_load_video_not_a_video(ctx, tmp_path):
+    bad = tmp_path / "notes.mp4"
+    bad.write_text("not a video")
+    with pytest.raises(ValueError, match="Cannot (read|decode) video"):
+        reference.load_reference(ctx, str(bad))
+
+
+def test_match_camera_from_points(ctx, tmp_work, fake_engine, use_engine, monkeypatch, tmp_path):
+    """The operator writes the points, runs convert + pnp, and places the camera from R, t."""
+    use_engine(fake_engine)
+    cam = _capture(ctx)
+    ctx.view_layer.update()
+    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
+    vs = ctx.scene.viscoscope
+    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05), (0, 0.046, 0.114)):
+        p = vs.points.add()
+        p.world = world
+        p.image = camera_math.project(truth, world)
+    result = tmp_path / "pnp.json"
+    result.write_text(json.dumps(truth))
+    monkeypatch.setenv("FAKE_PNP_RESULT", str(result))
+    expected = cam.matrix_world.copy()
+    cam.location = (1, 2, 3)
+    cam.rotation_euler = (0, 0, 0)
+    assert bpy.ops.viscoscope.match_camera() == {'FINISHED'}
+    for i in range(4):
+        for j in range(4):
+            assert cam.matrix_world[i][j] == pytest.approx(expected[i][j], abs=1e-5)
+    assert vs.reprojection_error == pytest.approx(0.0, abs=1e-3)
+    points = json.load(open(os.path.join(str(tmp_work), "camera", "points.json")))
+    assert len(points["world"]) == 5 and points["world"][0] == pytest.approx([-0.046, 0, 0.114])
+
+
+def test_match_camera_needs_four_points(ctx, tmp_work):
+    _capture(ctx)
+    with pytest.raises(RuntimeError, match="mark at least 4 points, 0 marked"):
+        bpy.ops.viscoscope.match_camera()
+
+
+def test_identify_cancel_resume_and_results(ctx, tmp_work, fake_engine, use_engine, clip_path, monkeypatch):
+    use_engine(fake_engine)
+    _capture(ctx)
+    assert bpy.ops.viscoscope.load_video(filepath=clip_path) == {'FINISHED'}
+    vs = ctx.scene.viscoscope
+    vs.max_generations = 40
+    monkeypatch.setenv("FAKE_ENGINE_SLEEP", "0.05")
+    from viscoscope.operators.identify import VISCOSCOPE_OT_identify, identify_dir
+    args, out_dir = VISCOSCOPE_OT_identify.prepare(VISCOSCOPE_OT_identify, ctx)
+    job = json.load(open(os.path.join(identify_dir(ctx.scene), "job.json")))
+    assert job["format"] == "viscoscope.job" and job["max_generations"] == 40
+    assert job["parameters"][0]["initial"] == pytest.approx(5.0)
+    assert os.path.isfile(os.path.join(identify_dir(ctx.scene), job["scene"]))
+    runner.start(ctx, "identify", args, out_dir, lambda c, d: None)
+    deadline = 200
+    while runner.pump(ctx, "identify") == 'RUNNING' and vs.identify_job.progress < 10 and deadline:
+        deadline -= 1
+        import time
+        time.sleep(0.02)
+    st = vs.identify_job
+    assert st.status.startswith("Generation ") and "best η" in st.status and "best E" in st.status
+    assert runner.cancel("identify")
+    while runner.pump(ctx, "identify") == 'RUNNING':
+        pass
+    assert st.can_resume and st.status.startswith("Cancelled")
+    assert vs.result_eta == 0.0
+    # Resume continues from the checkpoint and loads the result.
+    assert bpy.ops.viscoscope.identify_resume('EXEC_DEFAULT') == {'FINISHED'}
+    starts = [int(x) for x in open(os.path.join(out_dir, "starts.txt")).read().split()]
+    assert starts[0] == 0 and 0 < starts[1] < 40
+    assert vs.result_eta == pytest.approx(7.9)
+    assert (vs.result_eta_low, vs.result_eta_high) == (pytest.approx(7.5), pytest.approx(8.3))
+    assert vs.fluid.viscosity == pytest.approx(7.9)
+    assert st.status == "Done" and not st.can_resume
+
+
+def test_identify_without_video_is_a_clear_error(ctx, tmp_work, fake_engine, use_engine):
+    use_engine(fake_engine)
+    _capture(ctx)
+    with pytest.raises(RuntimeError, match="no reference video"):
+        bpy.ops.viscoscope.identify('EXEC_DEFAULT')
+
+
+def test_resume_without_a_previous_run(ctx, tmp_work, fake_engine, use_engine, clip_path):
+    use_engine(fake_engine)
+    _capture(ctx)
+    ctx.scene.viscoscope.video_path = clip_path
+    with pytest.raises(RuntimeError, match="nothing to resume"):
+        bpy.ops.viscoscope.identify_resume('EXEC_DEFAULT')
+
+
+def test_identify_result_plots_are_loaded(ctx, tmp_work, fake_engine, use_engine, clip_path):
+    use_engine(fake_engine)
+    _capture(ctx)
+    ctx.scene.viscoscope.video_path = clip_path
+    ctx.scene.viscoscope.max_generations = 3
+    assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'FINISHED'}
+    img = bpy.data.images.get("convergence.png")
+    assert img is not None and tuple(img.size) == (8, 6)
+
+
+def test_preview_silhouettes_overlays_masks(ctx, tmp_work, fake_engine, use_engine, clip_path, monkeypatch):
+    use_engine(fake_engine)
+    cam = _capture(ctx)
+    assert bpy.ops.viscoscope.load_video(filepath=clip_path) == {'FINISHED'}
+    ctx.scene.viscoscope.background_frames = 3
+    monkeypatch.setenv("FAKE_ENGINE_FRAMES", "12")
+    assert bpy.ops.viscoscope.preview_silhouettes('EXEC_DEFAULT') == {'FINISHED'}
+    manifest = json.load(open(os.path.join(str(tmp_work), "silhouettes", "manifest.json")))
+    assert manifest["options"][:2] == ["--background-frames", "3"]
+    overlay = [b for b in cam.data.background_images if b.source == 'IMAGE']
+    assert len(overlay) == 1 and overlay[0].image.source == 'SEQUENCE'
+    assert overlay[0].image_user.frame_duration == 12 and overlay[0].display_depth == 'FRONT'
+    assert [b.source for b in cam.data.background_images].count('MOVIE_CLIP') == 1
+
+
+def test_preview_silhouettes_without_video(ctx, tmp_work, fake_engine, use_engine):
+    use_engine(fake_engine)
+    _capture(ctx)
+    with pytest.raises(RuntimeError, match="reference video not found: none chosen"):
+        bpy.ops.viscoscope.preview_silhouettes('EXEC_DEFAULT')
+
+
+@pytest.mark.engine
+def test_load_hidden_fields_from_engine_output(ctx, tmp_work, engine_path):
+    """"Load hidden fields" imports an engine .vdb sequence (a simulate run stands in for identify's best run)."""
+    container.add_cup(ctx, (0, 0, 0))
+    ctx.scene.viscoscope.sim_resolution = 16
+    ctx.scene.viscoscope.sim_frames = 3
+    scene_path = os.path.join(str(tmp_work), "scene.json")
+    scene_export.export_scene(ctx.scene, scene_path)
+    fields = os.path.join(str(tmp_work), "identify", "out", "fields")
+    subprocess.run([engine_path, "simulate", scene_path, "--out", fields, "--progress", "none"], check=True)
+    ctx.scene.viscoscope.identify_job.out_dir = os.path.dirname(fields)
+    assert bpy.ops.viscoscope.load_fields() == {'FINISHED'}
+    obj = bpy.data.objects["Viscoscope Hidden Fields"]
+    vol = obj.modifiers[0].object.data
+    vol.grids.load()
+    assert {"surface", "velocity", "pressure"} <= {g.name for g in vol.grids}
+
+
+@pytest.mark.engine
+def test_real_engine_extract_and_overlay(ctx, tmp_work, engine_path, use_engine, clip_path):
+    use_engine(engine_path)
+    cam = _capture(ctx)
+    assert bpy.ops.viscoscope.load_video(filepath=clip_path) == {'FINISHED'}
+    ctx.scene.viscoscope.background_frames = 3
+    assert bpy.ops.viscoscope.preview_silhouettes('EXEC_DEFAULT') == {'FINISHED'}
+    masks = os.listdir(os.path.join(str(tmp_work), "silhouettes", "masks"))
+    assert len(masks) >= 1
+    assert any(b.source == 'IMAGE' and b.image.source == 'SEQUENCE' for b in cam.data.background_images)
+
+
+@pytest.mark.engine
+def test_real_engine_match_camera_from_points(ctx, tmp_work, engine_path, use_engine):
+    use_engine(engine_path)
+    cam = _capture(ctx)
+    ctx.view_layer.update()
+    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
+    vs = ctx.scene.viscoscope
+    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05),
+                  (0, 0.046, 0.114), (0, -0.046, 0.05)):
+        p = vs.points.add()
+        p.world = world
+        p.image = camera_math.project(truth, world)
+    expected = cam.matrix_world.copy()
+    cam.location = (0.02, -0.5, 0.2)
+    cam.rotation_euler = (math.radians(70), 0.05, 0.1)
+    assert bpy.ops.viscoscope.match_camera() == {'FINISHED'}
+    for i in range(3):
+        for j in range(4):
+            assert cam.matrix_world[i][j] == pytest.approx(expected[i][j], abs=1e-3)
+    assert 0.0 <= vs.reprojection_error < 0.05

@@ -1,0 +1,189 @@
+// The extract / score / camera commands as a user runs them: good runs, and bad input that must
+// end with exit code 2, one line on stderr, and no complete-looking output.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <sstream>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CommandResult {
+    int exitCode;
+    std::string out, err;
+};
+
+std::string slurp(const fs::path& file) {
+    std::ifstream stream(file);
+    std::stringstream text;
+    text << stream.rdbuf();
+    return text.str();
+}
+
+class CliObserve : public ::testing::Test {
+protected:
+    void SetUp() override {
+        // One folder per test and process: CTest runs the cases of this file in parallel.
+        const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+        dir_ = fs::temp_directory_path() / ("viscoscope_cli_observe_" + test + "_" + std::to_string(getpid()));
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+        if (std::system("ffmpeg -version > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg not installed";
+    }
+
+    CommandResult run(const std::string& arguments) const {
+        const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir_ / "stdout").string() +
+                                    " 2> " + (dir_ / "stderr").string();
+        const int status = std::system(command.c_str());
+        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir_ / "stdout"), slurp(dir_ / "stderr")};
+    }
+
+    // A short test-pattern clip made by the ffmpeg tool (this test links no OpenCV).
+    fs::path makeVideo(const std::string& name, int frames) const {
+        const fs::path video = dir_ / name;
+        const std::string command = "ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v " +
+                                    std::to_string(frames) + " -c:v mpeg4 " + video.string();
+        EXPECT_EQ(std::system(command.c_str()), 0);
+        return video;
+    }
+
+    void writeCamera(const fs::path& file) const {
+        const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
+                                    {"K", {{100, 0, 47.5}, {0, 100, 35.5}, {0, 0, 1}}},
+                                    {"distortion", {0, 0, 0, 0, 0}},
+                                    {"R", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}},
+                                    {"t", {0, 0, 0}}};
+        std::ofstream(file) << camera.dump();
+    }
+
+    // One triangle per frame, at depth `z` in front of (z > 0) or behind (z < 0) the camera.
+    fs::path writeMeshFrames(const std::string& name, int frames, double z) const {
+        const fs::path sim = dir_ / name;
+        fs::create_directories(sim);
+        for (int f = 0; f < frames; ++f) {
+            char file[32];
+            std::snprintf(file, sizeof file, "frame_%05d.obj", f);
+            std::ofstream(sim / file) << "v -0.1 -0.1 " << z << "\nv 0.1 -0.1 " << z << "\nv 0 0.1 " << z << "\nf 1 2 3\n";
+        }
+        return sim;
+    }
+
+    void expectBadInput(const CommandResult& result, const fs::path& outDir) const {
+        EXPECT_EQ(result.exitCode, 2) << result.err;
+        EXPECT_FALSE(result.err.empty());
+        EXPECT_EQ(std::count(result.err.begin(), result.err.end(), '\n'), 1) << result.err;
+        EXPECT_EQ(result.err.rfind("viscoscope: ", 0), 0u) << result.err;
+        EXPECT_FALSE(fs::exists(outDir / "manifest.json"));
+        EXPECT_FALSE(fs::exists(outDir / "score.json"));
+    }
+
+    void TearDown() override { fs::remove_all(dir_); }
+
+    fs::path dir_;
+};
+
+}  // namespace
+
+TEST_F(CliObserve, ExtractThenScoreWithJsonProgress) {
+    const fs::path video = makeVideo("clip.mp4", 12);
+    const CommandResult extracted = run("extract " + video.string() + " --out " + (dir_ / "ref").string() +
+                              " --background-frames 3 --weights 0-2:0 --progress json --front-ray 0,36,1,0");
+    ASSERT_EQ(extracted.exitCode, 0) << extracted.err;
+    std::istringstream lines(extracted.out);
+    int progressLines = 0;
+    for (std::string line; std::getline(lines, line);) {
+        const nlohmann::json event = nlohmann::json::parse(line);  // throws if a line is not JSON
+        if (event.at("event") == "progress") ++progressLines;
+    }
+    EXPECT_EQ(progressLines, 12);
+    const nlohmann::json manifest = nlohmann::json::parse(slurp(dir_ / "ref" / "manifest.json"));
+    EXPECT_EQ(manifest.at("frames").size(), 12u);
+    EXPECT_TRUE(fs::exists(dir_ / "ref" / "tracks.csv"));
+    EXPECT_EQ(slurp(dir_ / "ref" / "tracks.csv").rfind("time_s,front_px,area_px\n", 0), 0u);
+
+    writeCamera(dir_ / "camera.json");
+    const fs::path sim = writeMeshFrames("sim", 12, 1.0);
+    const CommandResult scored = run("score --camera " + (dir_ / "camera.json").string() + " --reference " +
+                           (dir_ / "ref").string() + " --sim " + sim.string() + " --out " + (dir_ / "score").string());
+    ASSERT_EQ(scored.exitCode, 0) << scored.err;
+    const nlohmann::json score = nlohmann::json::parse(slurp(dir_ / "score" / "score.json"));
+    EXPECT_EQ(score.at("frames").size(), 12u);
+    EXPECT_FALSE(score.at("frames")[0].contains("E_f"));  // ω = 0: not scored
+    EXPECT_GT(score.at("E").get<double>(), 0);
+    EXPECT_TRUE(fs::exists(dir_ / "score" / "diff_00005.png"));
+}
+
+// Phones store portrait clips as landscape frames plus a rotation tag; masks must come out upright.
+TEST_F(CliObserve, HonoursRotationMetadata) {
+    const fs::path landscape = makeVideo("landscape.mp4", 4);
+    const fs::path portrait = dir_ / "portrait.mp4";
+    const std::string tag = "ffmpeg -v error -y -i " + landscape.string() + " -c copy -metadata:s:v:0 rotate=90 " +
+                            portrait.string();
+    ASSERT_EQ(std::system(tag.c_str()), 0);
+    const CommandResult extracted =
+        run("extract " + portrait.string() + " --out " + (dir_ / "ref").string() + " --background-frames 2");
+    ASSERT_EQ(extracted.exitCode, 0) << extracted.err;
+    const nlohmann::json manifest = nlohmann::json::parse(slurp(dir_ / "ref" / "manifest.json"));
+    EXPECT_EQ(manifest.at("width"), 72);
+    EXPECT_EQ(manifest.at("height"), 96);
+}
+
+// Progress goes to stdout as JSON (as the add-on runs it), so stderr holds only the error line.
+TEST_F(CliObserve, BadVideosExitTwoWithOneLine) {
+    const fs::path out = dir_ / "out";
+    const std::string outArgs = " --progress json --out " + out.string();
+    expectBadInput(run("extract " + (dir_ / "missing.mp4").string() + outArgs), out);
+
+    std::mt19937 rng(1);
+    std::ofstream corrupt(dir_ / "corrupt.mp4", std::ios::binary);
+    for (int i = 0; i < 4096; ++i) corrupt.put(static_cast<char>(rng()));
+    corrupt.close();
+    expectBadInput(run("extract " + (dir_ / "corrupt.mp4").string() + outArgs), out);
+
+    expectBadInput(run("extract " + makeVideo("empty.mp4", 0).string() + outArgs), out);
+
+    const fs::path video = makeVideo("short.mp4", 8);
+    expectBadInput(run("extract " + video.string() + outArgs + " --background-frames 2 --first 20"), out);
+    expectBadInput(run("extract " + video.string() + outArgs + " --background-frames 2 --last 30"), out);
+    expectBadInput(run("extract " + video.string() + outArgs + " --weights 3-1:1"), out);
+}
+
+TEST_F(CliObserve, BadScoringInputsExitTwoWithOneLine) {
+    const fs::path video = makeVideo("clip.mp4", 6);
+    ASSERT_EQ(run("extract " + video.string() + " --out " + (dir_ / "ref").string() + " --background-frames 2").exitCode, 0);
+    writeCamera(dir_ / "camera.json");
+    const std::string common = "score --progress json --camera " + (dir_ / "camera.json").string() + " --reference ";
+    const fs::path out = dir_ / "score";
+
+    const fs::path behind = writeMeshFrames("behind", 6, -1.0);
+    const CommandResult behindRun = run(common + (dir_ / "ref").string() + " --sim " + behind.string() + " --out " + out.string());
+    expectBadInput(behindRun, out);
+    EXPECT_NE(behindRun.err.find("behind the camera"), std::string::npos) << behindRun.err;
+
+    // A mask of the wrong size: a 10x10 PGM where a 96x72 mask belongs.
+    fs::copy(dir_ / "ref", dir_ / "ref_bad", fs::copy_options::recursive);
+    std::ofstream pgm(dir_ / "ref_bad" / "masks" / "mask_00003.png", std::ios::binary);
+    pgm << "P5\n10 10\n255\n" << std::string(100, '\0');
+    pgm.close();
+    const fs::path sim = writeMeshFrames("sim", 6, 1.0);
+    const CommandResult wrongSize = run(common + (dir_ / "ref_bad").string() + " --sim " + sim.string() + " --out " + out.string());
+    expectBadInput(wrongSize, out);
+    EXPECT_NE(wrongSize.err.find("mask_00003.png"), std::string::npos) << wrongSize.err;
+
+    expectBadInput(run(common + (dir_ / "ref").string() + " --sim " + (dir_ / "nowhere").string() + " --out " + out.string()), out);
+
+    std::ofstream(dir_ / "points.json") << R"({"world": [[0,0,0],[1,0,0],[0,1,0]], "image": [[1,2],[3,4],[5,6]]})";
+    expectBadInput(run("camera pnp --points " + (dir_ / "points.json").string() + " --intrinsics " +
+                       (dir_ / "camera.json").string() + " --out " + (dir_ / "posed.json").string()),
+                   out);
+    std::ofstream(dir_ / "blender.json") << R"({"format": "viscoscope.blender_camera", "version": 1, "lens_mm": 50})";
+    expectBadInput(run("camera convert " + (dir_ / "blender.json").string() + " --out " + (dir_ / "c.json").string()), out);
+}

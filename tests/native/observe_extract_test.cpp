@@ -1,0 +1,207 @@
+// Extraction on a synthetic video rendered here, frame weights, and scalar tracks.
+#include "observe/observe.h"
+#include "scene/scene.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+using namespace viscoscope;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr int kWidth = 640, kHeight = 480, kFrames = 40, kLiquidFreeFrames = 10;
+constexpr double kScale = kWidth / 480.0;  // the liquid's shape was laid out at 480 px wide
+constexpr double kFps = 25;
+
+// A grey-brown textured table with coloured blotches: smooth noise at two scales.
+cv::Mat3f texturedBackground() {
+    cv::Mat3f background(kHeight, kWidth);
+    cv::Mat3f fine(kHeight, kWidth), coarse(kHeight / 8, kWidth / 8);
+    cv::randu(fine, cv::Scalar::all(-1), cv::Scalar::all(1));
+    cv::randu(coarse, cv::Scalar::all(-1), cv::Scalar::all(1));
+    cv::GaussianBlur(fine, fine, cv::Size(0, 0), 2.0);
+    cv::resize(coarse, coarse, background.size(), 0, 0, cv::INTER_CUBIC);
+    background = cv::Scalar(120, 125, 130) + 90 * fine + 40 * coarse;
+    return background;
+}
+
+// The liquid: a stream falling from the top edge into a puddle that spreads, both wobbling.
+cv::Mat1b liquidMask(int frame) {
+    cv::Mat1b mask(kHeight, kWidth, uchar(0));
+    if (frame < kLiquidFreeFrames) return mask;
+    const double t = (frame - kLiquidFreeFrames + 1) / double(kFrames - kLiquidFreeFrames);
+    const cv::Point puddleCentre(kWidth / 2 + int(20 * kScale * t), int(kHeight * 0.72));
+    const cv::Size puddleAxes(int(kScale * (25 + 140 * t)), int(kScale * (10 + 45 * t)));
+    cv::ellipse(mask, puddleCentre, puddleAxes, 8 * std::sin(7 * t), 0, 360, cv::Scalar(255), cv::FILLED);
+    const int streamWidth = int(kScale * (10 + 6 * std::sin(11 * t)));
+    const int streamBottom = std::min(puddleCentre.y, int(kHeight * (0.2 + 1.5 * t)));
+    cv::rectangle(mask, cv::Rect(kWidth / 2 - streamWidth / 2, 0, streamWidth, streamBottom), cv::Scalar(255),
+                  cv::FILLED);
+    return mask;
+}
+
+// Background × slow exposure drift, the amber liquid, and per-frame sensor noise.
+cv::Mat3b renderFrame(const cv::Mat3f& background, const cv::Mat1b& liquid, int frame) {
+    // Auto exposure reacting to the dark liquid: the picture brightens by up to 8 % after the
+    // background was learned, more than MOG2's learned variance absorbs.
+    const double exposure = 1.0 + 0.08 * std::max(0, frame - kLiquidFreeFrames) / double(kFrames - kLiquidFreeFrames);
+    cv::Mat3f picture = background * exposure;
+    cv::Mat3f honey(kHeight, kWidth, cv::Vec3f(25, 85, 160));  // BGR amber
+    honey += 0.15 * (background - cv::Scalar(120, 125, 130));   // a little of the table shows through
+    honey.copyTo(picture, liquid);
+    cv::Mat3f noise(kHeight, kWidth);
+    cv::randn(noise, cv::Scalar::all(0), cv::Scalar::all(3.0));
+    picture += noise;
+    cv::Mat3b out;
+    picture.convertTo(out, CV_8UC3);
+    return out;
+}
+
+// An empty folder for one test, removed afterwards; the process id keeps parallel runs apart.
+struct TempDirectory {
+    explicit TempDirectory(const std::string& name)
+        : path(fs::temp_directory_path() / (name + "_" + std::to_string(getpid()))) {
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~TempDirectory() { fs::remove_all(path); }
+    fs::path path;
+};
+
+}  // namespace
+
+TEST(Extraction, SyntheticVideoMatchesTrueMasks) {
+    const TempDirectory temp("viscoscope_extract_test");
+    const fs::path& dir = temp.path;
+    cv::theRNG().state = 5;  // the texture and the noise come from OpenCV's generator
+    const cv::Mat3f background = texturedBackground();
+    const fs::path video = dir / "pour.mp4";
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), kFps, {kWidth, kHeight});
+    ASSERT_TRUE(writer.isOpened());
+    std::vector<cv::Mat1b> truth;
+    for (int f = 0; f < kFrames; ++f) {
+        truth.push_back(liquidMask(f));
+        writer.write(renderFrame(background, truth.back(), f));
+    }
+    writer.release();
+
+    ExtractionOptions options;
+    options.backgroundFrames = kLiquidFreeFrames;
+    options.weights = "0-9:0";
+    int progressCalls = 0;
+    const ReferenceManifest written =
+        extractSilhouettes(video, options, dir / "reference", [&](int, int) { ++progressCalls; });
+    const ReferenceManifest manifest = loadReferenceManifest(dir / "reference");
+    ASSERT_EQ(manifest.frames.size(), size_t(kFrames));
+    EXPECT_EQ(written.frames, manifest.frames);
+    EXPECT_EQ(progressCalls, kFrames);
+    EXPECT_NEAR(manifest.fps, kFps, 1e-6);
+    EXPECT_NEAR(manifest.times[20], 20 / kFps, 1e-9);
+    EXPECT_EQ(manifest.weights[9], 0);
+    EXPECT_EQ(manifest.weights[10], 1);
+    EXPECT_TRUE(fs::exists(dir / "reference" / "preview.png"));
+
+    double iouSum = 0, worstIou = 1;
+    for (size_t i = kLiquidFreeFrames; i < manifest.frames.size(); ++i) {
+        const double iou = intersectionOverUnion(manifest.mask(i), truth[manifest.frames[i]]);
+        iouSum += iou;
+        worstIou = std::min(worstIou, iou);
+    }
+    const double meanIou = iouSum / (kFrames - kLiquidFreeFrames);
+    long long falsePixelsBeforePour = 0;
+    for (int i = 0; i < kLiquidFreeFrames; ++i) falsePixelsBeforePour += cv::countNonZero(manifest.mask(i));
+    std::printf("[ figures  ] extraction on a %dx%d mp4v video with lighting drift and noise: mean IoU %.4f, "
+                "worst %.4f, %lld foreground pixels in the %d liquid-free frames\n",
+                kWidth, kHeight, meanIou, worstIou, falsePixelsBeforePour, kLiquidFreeFrames);
+    EXPECT_GE(meanIou, 0.95);
+    EXPECT_LT(falsePixelsBeforePour, 0.001 * kWidth * kHeight * kLiquidFreeFrames);
+
+    // A frame range and a step, on the same video.
+    options.first = 12;
+    options.last = 30;
+    options.step = 6;
+    options.weights = "";
+    const ReferenceManifest ranged = extractSilhouettes(video, options, dir / "ranged");
+    EXPECT_EQ(ranged.frames, (std::vector<int>{12, 18, 24, 30}));
+    EXPECT_TRUE(fs::exists(dir / "ranged" / "masks" / "mask_00024.png"));
+    options.last = kFrames + 5;
+    EXPECT_THROW(extractSilhouettes(video, options, dir / "past_end"), InputError);
+    EXPECT_FALSE(fs::exists(dir / "past_end" / "manifest.json"));
+}
+
+TEST(Extraction, CancelLeavesNoManifest) {
+    const TempDirectory temp("viscoscope_extract_cancel_test");
+    const fs::path& dir = temp.path;
+    for (int f = 0; f < 4; ++f)
+        cv::imwrite((dir / ("frame_" + std::to_string(f) + ".png")).string(), cv::Mat3b(40, 60, cv::Vec3b(90, 90, 90)));
+    ExtractionOptions options;
+    options.backgroundFrames = 2;
+    options.fps = 30;
+    const std::atomic<bool> cancel{true};
+    EXPECT_THROW(extractSilhouettes(dir, options, dir / "out", {}, &cancel), Cancelled);
+    EXPECT_FALSE(fs::exists(dir / "out" / "manifest.json"));
+    EXPECT_FALSE(fs::exists(dir / "out" / "masks"));
+    const ReferenceManifest manifest = extractSilhouettes(dir, options, dir / "out");
+    EXPECT_EQ(manifest.frames.size(), 4u);
+    options.fps.reset();
+    EXPECT_THROW(extractSilhouettes(dir, options, dir / "out2"), InputError);  // image folders need --fps
+}
+
+TEST(FrameWeights, RangesListsAndErrors) {
+    const std::vector<int> frames{0, 5, 10, 15, 20};
+    EXPECT_EQ(parseFrameWeights("", frames), (std::vector<double>{1, 1, 1, 1, 1}));
+    EXPECT_EQ(parseFrameWeights("0-10:1,11-20:0", frames), (std::vector<double>{1, 1, 1, 0, 0}));
+    EXPECT_EQ(parseFrameWeights("5:0, 15-15:0", frames), (std::vector<double>{1, 0, 1, 0, 1}));
+    EXPECT_EQ(parseFrameWeights("1,0,1,1,0", frames), (std::vector<double>{1, 0, 1, 1, 0}));
+    EXPECT_THROW(parseFrameWeights("1,0", frames), InputError);
+    EXPECT_THROW(parseFrameWeights("3-1:1", frames), InputError);
+    EXPECT_THROW(parseFrameWeights("a-b:1", frames), InputError);
+    EXPECT_THROW(parseFrameWeights("0-3:-1", frames), InputError);
+    EXPECT_THROW(parseFrameWeights("0-3:1,,", frames), InputError);
+}
+
+TEST(ScalarTracks, FrontAreaCsvAndNormalizedError) {
+    cv::Mat1b mask(50, 100, uchar(0));
+    cv::rectangle(mask, cv::Rect(10, 15, 50, 10), cv::Scalar(255), cv::FILLED);  // columns 10..59
+    EXPECT_NEAR(frontAlongRay(mask, {{0, 20}, {1, 0}}), 59, 0.5);
+    EXPECT_NEAR(frontAlongRay(mask, {{-30, 20}, {2, 0}}), 89, 0.5);  // origin outside the image
+    EXPECT_NEAR(frontAlongRay(mask, {{99, 20}, {-1, 0}}), 89, 0.5);
+    EXPECT_EQ(frontAlongRay(mask, {{0, 40}, {1, 0}}), 0);
+    EXPECT_EQ(silhouetteArea(mask), 500);
+
+    const fs::path measured = fs::path(VISCOSCOPE_SOURCE_DIR) / "../shared/data/measured/dambreak_syrup_validation.csv";
+    if (fs::exists(measured)) {
+        const ScalarTrack track = loadScalarTrackCsv(measured);
+        EXPECT_EQ(track.columns, std::vector<std::string>{"front_m"});
+        EXPECT_EQ(track.time.size(), 668u);
+    }
+    const TempDirectory temp("viscoscope_tracks_test");
+    const fs::path& dir = temp.path;
+    ScalarTrack track{{"front_m"}, {0, 1, 2, 3}, {{0.0, 0.1, 0.2, 0.3}}};
+    saveScalarTrackCsv(track, dir / "track.csv");
+    const ScalarTrack loaded = loadScalarTrackCsv(dir / "track.csv");
+    EXPECT_EQ(loaded.values, track.values);
+    EXPECT_NEAR(sampleTrack(loaded, 0, {1.5, -1, 9})[0], 0.15, 1e-12);
+    EXPECT_EQ(sampleTrack(loaded, 0, {-1})[0], 0.0);
+    const std::vector<double> reference{1, 2, 3}, simulated{1.1, 2.2, 3.3};
+    EXPECT_NEAR(normalizedSquaredError(simulated, reference), 0.01, 1e-12);
+
+    std::ofstream(dir / "bad.csv") << "time_s,front_m\n0,0.1\n1,abc\n";
+    try {
+        loadScalarTrackCsv(dir / "bad.csv");
+        FAIL() << "a non-numeric value was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("bad.csv:3"), std::string::npos) << e.what();
+    }
+    std::ofstream(dir / "backwards.csv") << "time_s,front_m\n1,0.1\n0,0.2\n";
+    EXPECT_THROW(loadScalarTrackCsv(dir / "backwards.csv"), InputError);
+}
