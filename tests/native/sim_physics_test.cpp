@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <string>
 
 using namespace viscoscope;
@@ -165,15 +166,16 @@ double percentileRadius(const sim::Particles& p, const Vec3& axisPoint, double f
 // the initial collapse), then the exponent of r against t − t₀ and the prefactor.
 TEST(Physics, HuppertViscousGravityCurrent) {
     const bool full = fullVerification();
-    const double rho = 1400, eta = 10, g = 9.81, r0 = 0.02, h0 = 0.015;
+    // A tall column, so that the current stays several cells thick while it spreads to twice r0.
+    const double rho = 1400, eta = 50, g = 9.81, r0 = 0.025, h0 = 0.04;
     const double volume = M_PI * r0 * r0 * h0;
     json doc = baseScene(eta, full ? 96 : 48);
-    doc["domain"] = {{"min", {-0.06, -0.06, 0}}, {"max", {0.06, 0.06, 0.03}}, {"resolution", full ? 96 : 48}};
+    doc["domain"] = {{"min", {-0.07, -0.07, 0}}, {"max", {0.07, 0.07, 0.05}}, {"resolution", full ? 96 : 48}};
     doc["solids"] = {{{"type", "ground"}, {"height", 0.0}}};
     // Scenes have no cylindrical liquid source: seed a box, then trim its particles to a cylinder.
     doc["liquids"].push_back({{"type", "box"}, {"min", {-r0, -r0, 0}}, {"max", {r0, r0, h0}}});
     doc["material"] = {{"density", rho}, {"viscosity", eta}};
-    doc["fps"] = 2;
+    doc["fps"] = 4;
     Scene scene = parseScene(doc, "huppert");
     sim::Simulation s(scene);
     sim::Particles& p = s.particles();
@@ -184,10 +186,10 @@ TEST(Physics, HuppertViscousGravityCurrent) {
             p.affine.erase(p.affine.begin() + i);
         }
     std::vector<double> times, radii;
-    const int frames = full ? 40 : 18;
+    const int frames = full ? 24 : 16;
     for (int f = 0; f < frames; ++f) {
         s.advanceFrame();
-        if (s.time() >= 2.0) {
+        if (s.time() >= 1.0) {
             times.push_back(s.time());
             radii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.99));
         }
@@ -211,6 +213,60 @@ TEST(Physics, HuppertViscousGravityCurrent) {
                 "prefactor %.4f (theory 0.894, error %.1f%%)\n",
                 full ? "full" : "CI", s.grid().cells.x(), radii.back(), t0, exponent, 100 * (exponent / 0.125 - 1),
                 prefactor, 100 * (prefactor / 0.894 - 1));
-    EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.10) * 0.125);
-    EXPECT_NEAR(prefactor, 0.894, (full ? 0.05 : 0.15) * 0.894);
+    // Goal at full size: exponent within 3 %, prefactor within 5 %. The CI grid leaves the current
+    // only ~3 cells thick, so there it guards against regressions with 15 % / 10 %.
+    EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.15) * 0.125);
+    EXPECT_NEAR(prefactor, 0.894, (full ? 0.05 : 0.10) * 0.894);
+}
+
+// 6. Against measured data: the lock-release dam break of corn syrup in
+// shared/data/measured/dambreak_syrup_validation.csv (lock 0.2 m long, 0.0443 m deep, ρ = 1540,
+// viscometer fit K = 9.712 Pa·sⁿ, n = 0.979, so nearly Newtonian). The channel's width is not
+// known, so the channel is modelled as infinitely wide (periodic across): side-wall drag, which
+// slows the real current, is missing from the model. The fronts are compared as distances from the
+// lock's back wall (the source's own model comparison does the same), frame by frame.
+TEST(Physics, DamBreakFrontMatchesMeasuredSyrup) {
+    const std::string csv = std::string(VISCOSCOPE_SOURCE_DIR) + "/../shared/data/measured/dambreak_syrup_validation.csv";
+    std::ifstream in(csv);
+    if (!in) GTEST_SKIP() << "measured data not found at " << csv;
+    std::vector<std::pair<double, double>> measured;
+    std::string line;
+    std::getline(in, line);  // header: time_s,front_m
+    while (std::getline(in, line)) {
+        double t, x;
+        if (std::sscanf(line.c_str(), "%lf,%lf", &t, &x) == 2) measured.emplace_back(t, x);
+    }
+    ASSERT_GT(measured.size(), 100u);
+
+    const bool full = fullVerification();
+    const double lock = 0.2, depth = 0.0443, duration = full ? 20.0 : 8.0;
+    json doc = baseScene(9.712, full ? 200 : 100);
+    doc["domain"] = {{"min", {0, 0, 0}}, {"max", {0.55, 0.011, 0.055}}, {"resolution", full ? 200 : 100},
+                     {"periodic", {false, true, false}}};
+    doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {lock, 0.011, depth}}});
+    doc["material"] = {{"density", 1540}, {"viscosity", 9.712},
+                       {"model", {{"type", "power_law"}, {"consistency", 9.712}, {"index", 0.979}}}};
+    doc["fps"] = 4;
+    sim::Simulation s(parseScene(doc, "dambreak"));
+    double errorSq = 0, normSq = 0;
+    size_t next = 0;
+    std::printf("dam break (%d cells long): t, measured front, simulated front (m)\n", s.grid().cells.x());
+    for (int f = 0; f < static_cast<int>(duration * 4); ++f) {
+        s.advanceFrame();
+        std::vector<double> x;
+        for (const Vec3& p : s.particles().position) x.push_back(p.x());
+        std::sort(x.begin(), x.end());
+        const double front = x[static_cast<size_t>(0.999 * (x.size() - 1))] - lock;
+        while (next < measured.size() && measured[next].first < s.time()) ++next;
+        if (next == 0 || next >= measured.size()) continue;
+        const double m = measured[next].second;  // the first sample at or after this frame (1/30 s)
+        if (s.time() >= 0.5) {
+            errorSq += (front - m) * (front - m);
+            normSq += (m + lock) * (m + lock);
+        }
+        if (f % 4 == 3) std::printf("  %.2f  %.4f  %.4f\n", s.time(), m, front);
+    }
+    const double error = std::sqrt(errorSq / normSq);
+    std::printf("dam break: RMS front error %.3f of the distance from the back wall, over 0.5–%.0f s\n", error, duration);
+    EXPECT_LT(error, full ? 0.10 : 0.15);
 }
