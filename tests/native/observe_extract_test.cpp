@@ -3,6 +3,8 @@
 #include "scene/scene.h"
 
 #include <gtest/gtest.h>
+
+#include <random>
 #include <unistd.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -204,4 +206,26 @@ TEST(ScalarTracks, FrontAreaCsvAndNormalizedError) {
     }
     std::ofstream(dir / "backwards.csv") << "time_s,front_m\n1,0.1\n0,0.2\n";
     EXPECT_THROW(loadScalarTrackCsv(dir / "backwards.csv"), InputError);
+}
+
+// Simulation-side observables on particle sets whose answers are known by construction: a disc of
+// liquid of radius R on the ground centred at (cx, cy), plus a column still above the ground.
+TEST(ScalarTracks, GroundObservablesOfParticles) {
+    std::mt19937 random(5);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const double radius = 0.04, cx = 0.01, cy = -0.02;
+    std::vector<Eigen::Vector3d> particles;
+    for (int i = 0; i < 20000; ++i) {
+        const double r = radius * std::sqrt(unit(random)), a = 2 * M_PI * unit(random);
+        particles.emplace_back(cx + r * std::cos(a), cy + r * std::sin(a), 0.004 * unit(random));
+    }
+    for (int i = 0; i < 5000; ++i) particles.emplace_back(cx, cy, 0.05 + 0.05 * unit(random));
+    const GroundObservables ground{0.0, 0.005};
+    const double diameter = puddleDiameter(particles, Eigen::Vector3d(cx, cy, 0), ground);
+    const double front = frontAlongGround(particles, Eigen::Vector3d(cx, cy, 0), Eigen::Vector3d(1, 0, 0), ground);
+    std::printf("puddle diameter %.4f m (true %.4f), front %.4f m (true %.4f)\n", diameter, 2 * radius, front, radius);
+    EXPECT_NEAR(diameter, 2 * radius, 0.01 * 2 * radius);
+    EXPECT_NEAR(front, radius, 0.02 * radius);
+    EXPECT_DOUBLE_EQ(drainedVolume(particles, 1e-9, 0.01), 20000 * 1e-9);
+    EXPECT_THROW(frontAlongGround(particles, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, 1), ground), InputError);
 }

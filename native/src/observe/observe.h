@@ -125,6 +125,23 @@ std::vector<double> sampleTrack(const ScalarTrack& track, size_t column, const s
 // Σ(a − b)² / Σ b², with `reference` = b. Throws InputError on a size mismatch or an all-zero b.
 double normalizedSquaredError(const std::vector<double>& simulated, const std::vector<double>& reference);
 
+// The same observables measured on a simulated liquid, from its particles (world frame, Z-up, m).
+// "On the ground" means within `band` above `groundHeight`. Extremes are taken at the 99.5th
+// percentile, so that a stray particle does not move a front.
+struct GroundObservables {
+    double groundHeight = 0;
+    double band = 0.005;
+};
+// How far the liquid on the ground reaches from `origin` along the horizontal `direction` (m),
+// counting the liquid within `band` of that line.
+double frontAlongGround(const std::vector<Eigen::Vector3d>& particles, const Eigen::Vector3d& origin,
+                        const Eigen::Vector3d& direction, const GroundObservables& ground);
+// Twice the radius of the liquid on the ground around the vertical axis through `centre` (m).
+double puddleDiameter(const std::vector<Eigen::Vector3d>& particles, const Eigen::Vector3d& centre,
+                      const GroundObservables& ground);
+// Volume of the liquid below `height` (m³): the particles there times the volume each carries.
+double drainedVolume(const std::vector<Eigen::Vector3d>& particles, double particleVolume, double height);
+
 // ---------------------------------------------------------------------------------------------
 // Simulated silhouettes
 

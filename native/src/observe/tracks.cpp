@@ -164,3 +164,49 @@ std::vector<double> sampleTrack(const ScalarTrack& track, size_t column, const s
 }
 
 }  // namespace viscoscope
+
+namespace viscoscope {
+
+namespace {
+constexpr double kExtremePercentile = 0.995;
+
+double percentile(std::vector<double> values, double q) {
+    if (values.empty()) return 0;
+    const size_t k = static_cast<size_t>(q * (values.size() - 1));
+    std::nth_element(values.begin(), values.begin() + k, values.end());
+    return values[k];
+}
+
+bool onGround(const Eigen::Vector3d& x, const GroundObservables& g) {
+    return x.z() >= g.groundHeight - 1e-9 && x.z() <= g.groundHeight + g.band;
+}
+}  // namespace
+
+double frontAlongGround(const std::vector<Eigen::Vector3d>& particles, const Eigen::Vector3d& origin,
+                        const Eigen::Vector3d& direction, const GroundObservables& ground) {
+    const Eigen::Vector3d d(direction.x(), direction.y(), 0);
+    if (d.norm() == 0) throw InputError("front direction: must have a horizontal component");
+    // Like frontAlongRay: only the liquid on a strip along the ray counts, `band` wide each side.
+    const Eigen::Vector3d along = d.normalized(), across(-along.y(), along.x(), 0);
+    std::vector<double> reach;
+    for (const Eigen::Vector3d& x : particles)
+        if (onGround(x, ground) && std::abs((x - origin).dot(across)) <= ground.band)
+            reach.push_back((x - origin).dot(along));
+    return std::max(0.0, percentile(std::move(reach), kExtremePercentile));
+}
+
+double puddleDiameter(const std::vector<Eigen::Vector3d>& particles, const Eigen::Vector3d& centre,
+                      const GroundObservables& ground) {
+    std::vector<double> radius;
+    for (const Eigen::Vector3d& x : particles)
+        if (onGround(x, ground)) radius.push_back(std::hypot(x.x() - centre.x(), x.y() - centre.y()));
+    return 2 * percentile(std::move(radius), kExtremePercentile);
+}
+
+double drainedVolume(const std::vector<Eigen::Vector3d>& particles, double particleVolume, double height) {
+    return particleVolume * static_cast<double>(std::count_if(
+                                particles.begin(), particles.end(),
+                                [&](const Eigen::Vector3d& x) { return x.z() < height; }));
+}
+
+}  // namespace viscoscope
