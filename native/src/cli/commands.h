@@ -26,5 +26,6 @@ Command addSimulateCommand(CLI::App& app);
 Command addExtractCommand(CLI::App& app);
 Command addScoreCommand(CLI::App& app);
 Command addCameraCommand(CLI::App& app);
+Command addIdentifyCommand(CLI::App& app);
 
 }  // namespace viscoscope::cli

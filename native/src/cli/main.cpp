@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
         cli::addExtractCommand(app),
         cli::addScoreCommand(app),
         cli::addCameraCommand(app),
+        cli::addIdentifyCommand(app),
     };
 
     try {

@@ -1,0 +1,112 @@
+// `viscoscope identify job.json --out DIR`: CMA-ES over simulations (identify stage). Re-running
+// with the same --out resumes from DIR/checkpoint.json. SIGTERM/SIGINT: the current generation's
+// evaluations finish, the checkpoint is written and the command exits 3.
+#include "cli/commands.h"
+#include "cli/progress.h"
+#include "identify/identify.h"
+
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <unistd.h>
+
+namespace viscoscope::cli {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct IdentifyArguments {
+    std::string job, outDir, progress = "text";
+    int threads = 0;
+    bool noPlots = false, noFields = false;
+};
+
+// scripts/plot_identification.py next to the executable's source tree, or $VISCOSCOPE_SCRIPTS.
+std::optional<fs::path> findPlotScript() {
+    if (const char* dir = std::getenv("VISCOSCOPE_SCRIPTS")) {
+        const fs::path p = fs::path(dir) / "plot_identification.py";
+        if (fs::exists(p)) return p;
+    }
+    std::error_code ec;
+    fs::path here = fs::read_symlink("/proc/self/exe", ec).parent_path();
+    for (int up = 0; up < 6 && !here.empty(); ++up, here = here.parent_path()) {
+        const fs::path p = here / "scripts" / "plot_identification.py";
+        if (fs::exists(p)) return p;
+        if (here == here.parent_path()) break;
+    }
+    return std::nullopt;
+}
+
+// convergence.png and landscape.png via matplotlib; a missing plotter is a note, not an error.
+std::string makePlots(const fs::path& outDir) {
+    const auto script = findPlotScript();
+    if (!script) return "skipped: scripts/plot_identification.py not found";
+    if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0)
+        return "skipped: /usr/bin/python3 with matplotlib not available";
+    const std::string command = "/usr/bin/python3 '" + script->string() + "' '" + outDir.string() + "' > /dev/null 2>&1";
+    return std::system(command.c_str()) == 0 ? "ok" : "failed: " + command;
+}
+
+int runIdentify(const IdentifyArguments& args) {
+    openvdb::initialize();
+    identify::Job job = identify::loadJob(args.job);
+    const ProgressReporter progress(args.progress);
+    identify::IdentifyOptions options;
+    options.threads = args.threads;
+    options.cancel = &g_cancelRequested;
+    options.writeFields = !args.noFields;
+    options.onGeneration = [&](const identify::GenerationReport& r) {
+        nlohmann::json event{{"event", "progress"},      {"stage", "identify"},         {"generation", r.generation},
+                             {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},
+                             {"sigma", r.sigma},         {"elapsed", r.elapsed},         {"eta", r.remaining}};
+        if (!r.bestTheta.empty()) {
+            nlohmann::json theta = nlohmann::json::object();
+            for (size_t i = 0; i < job.parameters.size(); ++i) {
+                theta[job.parameters[i].name] = r.bestTheta[i];
+                if (job.parameters[i].name == "viscosity") event["best_eta"] = r.bestTheta[i];
+            }
+            event["best_theta"] = theta;
+        }
+        if (std::isfinite(r.bestE)) event["best_E"] = r.bestE;
+        if (r.resumed) event["resumed"] = true;
+        progress.report(event);
+    };
+    try {
+        const identify::IdentificationResult result = identify::identify(job, args.outDir, options);
+        std::string plots = args.noPlots ? "skipped: --no-plots" : makePlots(args.outDir);
+        nlohmann::json done{{"event", "done"},          {"stage", "identify"},         {"theta", result.theta},
+                            {"interval", result.interval}, {"interval_method", result.intervalMethod},
+                            {"E", result.E},             {"stop", identify::toString(result.stop)},
+                            {"generations", result.generations}, {"evaluations", result.evaluations},
+                            {"wall_s", result.seconds}, {"plots", plots}};
+        if (result.resumedFromGeneration > 0) done["resumed_from_generation"] = result.resumedFromGeneration;
+        progress.report(done);
+        return kExitOk;
+    } catch (const Cancelled& e) {
+        progress.report({{"event", "cancelled"}, {"stage", "identify"}, {"message", e.what()}});
+        return kExitCancelled;
+    }
+}
+
+}  // namespace
+
+Command addIdentifyCommand(CLI::App& app) {
+    auto args = std::make_shared<IdentifyArguments>();
+    CLI::App* sub = app.add_subcommand("identify", "Identify material parameters (viscosity) by CMA-ES over simulations");
+    sub->add_option("job", args->job, "job.json (format viscoscope.job, version 1)")->required();
+    sub->add_option("--out", args->outDir, "Output folder: result.json, checkpoint.json, plots, fields/ (resumes)")
+        ->required();
+    sub->add_option("--progress", args->progress, "Progress format: text, json or none")
+        ->check(CLI::IsMember({"text", "json", "none"}))
+        ->capture_default_str();
+    sub->add_option("--threads", args->threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    sub->add_flag("--no-plots", args->noPlots, "Do not draw convergence.png / landscape.png");
+    sub->add_flag("--no-fields", args->noFields, "Do not re-simulate θ* to write fields/frame_*.vdb");
+    return {sub, [args] { return runIdentify(*args); }};
+}
+
+}  // namespace viscoscope::cli

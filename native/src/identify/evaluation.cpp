@@ -1,0 +1,126 @@
+// One evaluation of the objective: θ → simulation at a resolution → per-frame liquid level set →
+// silhouette through the camera → E = Σ_f ω_f E_f (+ a weighted scalar-track term).
+#include "identify/identify.h"
+
+#include "sim/sim.h"
+#include "surface/surface.h"
+
+#include <chrono>
+#include <cmath>
+
+namespace viscoscope::identify {
+
+namespace fs = std::filesystem;
+
+void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>* cancel) {
+    if (!job.referenceDir.empty() || !job.video) return;
+    const fs::path dir = outDir / "reference";
+    if (!fs::exists(dir / "manifest.json")) {
+        ExtractionOptions options;
+        extractSilhouettes(*job.video, options, dir, {}, cancel);
+    }
+    job.referenceDir = dir;
+    const ReferenceManifest reference = loadReferenceManifest(dir);
+    if (reference.width != job.camera.width || reference.height != job.camera.height)
+        throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
+                         std::to_string(job.camera.height) + ", the video " + job.video->string() + " is " +
+                         std::to_string(reference.width) + "x" + std::to_string(reference.height));
+}
+
+Observation loadObservation(const Job& job) {
+    Observation obs;
+    obs.reference = loadReferenceManifest(job.referenceDir);
+    const ReferenceManifest& ref = obs.reference;
+    const std::string origin = (job.referenceDir / "manifest.json").string();
+    if (ref.width != job.camera.width || ref.height != job.camera.height)
+        throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
+                         std::to_string(job.camera.height) + ", reference masks are " + std::to_string(ref.width) +
+                         "x" + std::to_string(ref.height));
+    obs.compared = ref.comparedPixels();
+    obs.masks.resize(ref.frames.size());
+    obs.simFrames.assign(ref.frames.size(), -1);
+    int used = 0;
+    for (size_t i = 0; i < ref.frames.size(); ++i) {
+        if (ref.weights[i] <= 0 || ref.frames[i] - ref.frames.front() > job.lastSourceFrame) continue;
+        if (job.maxFrames > 0 && used >= job.maxFrames) continue;
+        const double t = ref.times[i] + job.timeOffset;
+        if (!std::isfinite(t) || t < -1e-9) continue;  // before the simulation starts
+        obs.simFrames[i] = static_cast<int>(std::lround(t * job.scene.fps));
+        obs.masks[i] = ref.mask(i);
+        ++used;
+    }
+    if (used == 0)
+        throw InputError(origin + ": no reference frames to compare (all weights 0, or all outside the job's "
+                                  "frame range / before the simulation starts)");
+    if (job.trackCsv) {
+        obs.track = loadScalarTrackCsv(*job.trackCsv);
+        bool known = false;
+        for (const std::string& column : obs.track->columns) known |= column == "area_px";
+        if (!known) throw InputError(job.trackCsv->string() + ": needs an \"area_px\" column (silhouette area)");
+    }
+    return obs;
+}
+
+Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution) {
+    Scene scene = job.scene;
+    for (size_t i = 0; i < job.parameters.size(); ++i) {
+        if (job.parameters[i].name == "viscosity") scene.material.viscosity = theta.at(i);
+        else if (job.parameters[i].name == "surface_tension") scene.material.surfaceTension = theta.at(i);
+    }
+    scene.domain.resolution = resolution;
+    // Every evaluation uses the job's seed (common random numbers): E depends on θ and the
+    // resolution only, never on which thread or in which order it ran.
+    scene.seed = static_cast<unsigned>(job.seed);
+    scene.outputs = Outputs{false, false, false};
+    return scene;
+}
+
+Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
+                    const std::atomic<bool>* cancel) {
+    (void)cancel;  // an evaluation always finishes; the loop checks cancel between generations
+    const auto start = std::chrono::steady_clock::now();
+    Evaluation ev;
+    ev.theta = theta;
+    ev.resolution = resolution;
+    const Scene scene = sceneWithParameters(job, theta, resolution);
+    const auto setupStart = std::chrono::steady_clock::now();
+    sim::Simulation simulation(scene);
+    ev.simulationSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - setupStart).count();
+    int lastFrame = 0;
+    for (int f : obs.simFrames) lastFrame = std::max(lastFrame, f);
+    const size_t count = obs.simFrames.size();
+    ev.frameE.assign(count, 0.0);
+    std::vector<double> areas(count, 0.0);
+    for (int frame = 0; frame <= lastFrame; ++frame) {
+        const auto simStart = std::chrono::steady_clock::now();
+        if (frame > 0) simulation.advanceFrame();
+        const auto simEnd = std::chrono::steady_clock::now();
+        ev.simulationSeconds += std::chrono::duration<double>(simEnd - simStart).count();
+        for (size_t i = 0; i < count; ++i) {
+            if (obs.simFrames[i] != frame) continue;
+            const auto levelSet = surface::liquidLevelSet(simulation.particles().position, scene.cellSize());
+            const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
+                                                              : silhouetteFromLevelSetFast(*levelSet, job.camera);
+            ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared);
+            areas[i] = silhouetteArea(obs.compared.empty() ? silhouette : cv::Mat1b(silhouette & obs.compared));
+            ev.simulatedPixels += areas[i];
+            ev.E += obs.reference.weights[i] * ev.frameE[i];
+        }
+        ev.silhouetteSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - simEnd).count();
+    }
+    if (obs.track) {
+        size_t column = 0;
+        while (obs.track->columns[column] != "area_px") ++column;
+        std::vector<double> times, simulated;
+        for (size_t i = 0; i < count; ++i)
+            if (obs.simFrames[i] >= 0) {
+                times.push_back(obs.reference.times[i]);
+                simulated.push_back(areas[i]);
+            }
+        ev.E += job.trackWeight * normalizedSquaredError(simulated, sampleTrack(*obs.track, column, times));
+    }
+    ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return ev;
+}
+
+}  // namespace viscoscope::identify

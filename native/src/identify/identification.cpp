@@ -1,0 +1,535 @@
+// The identification loop: CMA-ES in log-parameter space, the population simulated in parallel
+// (TBB), two fidelities, a checkpoint after every generation, resume, stopping rules and results.
+//
+// Fidelity policy (measured in tests/bench/identify_bench.cpp):
+//   * generations [0, G_c) run at the coarse resolution r_c = max(8, round(coarse_factor · r)),
+//     G_c = fidelity.coarse_generations, by default min(⌊max_generations / 2⌋, 10), and always
+//     ≤ max_generations − 1 so at least one generation runs at the job's resolution r;
+//   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
+//     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted);
+//   * at the switch the CMA-ES state is kept, σ is raised so that the largest σ√C_ii is at least
+//     0.1 (≈ 10 % in θ, the size of the coarse-to-fine shift we measured), and the best-so-far is
+//     reset: E values of different resolutions are not comparable;
+//   * tolerances are checked only at full resolution, after fidelity.min_fine_generations there.
+#include "identify/identify.h"
+
+#include "sim/sim.h"
+#include "surface/surface.h"
+
+#include <Eigen/QR>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+
+namespace viscoscope::identify {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+const char* toString(StopReason reason) {
+    switch (reason) {
+        case StopReason::MaxGenerations: return "max_generations";
+        case StopReason::ToleranceX: return "tolerance_x";
+        case StopReason::ToleranceFun: return "tolerance_fun";
+        case StopReason::Cancelled: return "cancelled";
+    }
+    return "?";
+}
+
+void writeJsonAtomically(const json& doc, const fs::path& file) {
+    const fs::path partial = file.string() + ".partial";
+    {
+        std::ofstream stream(partial, std::ios::trunc);
+        stream << doc.dump(1) << "\n";
+        stream.flush();
+        if (!stream) throw std::runtime_error(partial.string() + ": cannot write");
+    }
+    fs::rename(partial, file);  // atomic on POSIX: readers see the old or the new file, never half
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::string fingerprint(const Job& job) {
+    // FNV-1a over the job document and the resolved inputs that change E.
+    // Settings that change neither E nor the CMA-ES state may differ between runs of one job.
+    json doc = job.document;
+    for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun"}) doc.erase(key);
+    doc["_scene"] = sceneToJson(job.scene);
+    doc["_camera"] = cameraToJson(job.camera);
+    doc["_reference"] = job.referenceDir.string();
+    const std::string text = doc.dump();
+    std::uint64_t hash = 1469598103934665603ull;
+    for (unsigned char c : text) hash = (hash ^ c) * 1099511628211ull;
+    std::ostringstream out;
+    out << std::hex << std::setw(16) << std::setfill('0') << hash;
+    return out.str();
+}
+
+struct LogBounds {
+    Eigen::VectorXd lower, upper;
+};
+
+double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo, x)); }
+
+std::vector<double> thetaOf(const Eigen::VectorXd& x, const LogBounds& b) {
+    std::vector<double> theta(x.size());
+    for (Eigen::Index i = 0; i < x.size(); ++i) theta[i] = std::exp(clipped(x[i], b.lower[i], b.upper[i]));
+    return theta;
+}
+
+double boundPenalty(const Eigen::VectorXd& x, const LogBounds& b) {
+    double p = 0;
+    for (Eigen::Index i = 0; i < x.size(); ++i) p += std::pow(x[i] - clipped(x[i], b.lower[i], b.upper[i]), 2);
+    return p;
+}
+
+int coarseResolution(const Job& job) {
+    return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
+}
+
+int plannedCoarseGenerations(const Job& job) {
+    if (coarseResolution(job) >= job.resolution) return 0;
+    int g = job.fidelity.coarseGenerations >= 0 ? job.fidelity.coarseGenerations
+                                                : std::min(job.maxGenerations / 2, 10);
+    return std::max(0, std::min(g, job.maxGenerations - 1));
+}
+
+json vec(const std::vector<double>& v) { return json(v); }
+
+// Does the camera see the initial liquid at all? A wrong camera fails here, before any simulation.
+void requireCameraSeesLiquid(const Job& job, int resolution) {
+    const Scene scene = sceneWithParameters(job, std::vector<double>(job.parameters.size(), 1.0), resolution);
+    sim::Simulation simulation(scene);
+    const auto& positions = simulation.particles().position;
+    if (positions.empty()) return;  // emitters: nothing to check before the liquid appears
+    const cv::Mat1b mask = silhouetteFromParticles(positions, scene.cellSize(), job.camera);
+    if (silhouetteArea(mask) == 0)
+        throw InputError(job.cameraFile.string() + ": the camera sees none of the liquid (" +
+                         std::to_string(positions.size()) + " particles project outside the " +
+                         std::to_string(job.camera.width) + "x" + std::to_string(job.camera.height) +
+                         " image or lie behind the camera)");
+}
+
+// E ≈ a + b u + c u², u = x − x_best, least squares over full-resolution evaluations of one
+// parameter; the interval is where the parabola stays within ΔE of its minimum, ΔE = 2 × the RMS
+// residual of the fit (the simulation noise in E), at least 1 % of E_min.
+std::optional<std::array<double, 2>> profileInterval(const std::vector<std::pair<double, double>>& points,
+                                                     double xBest, double range, json& info) {
+    std::vector<std::pair<double, double>> near;
+    for (const auto& p : points)
+        if (std::abs(p.first - xBest) <= range && std::isfinite(p.second)) near.push_back(p);
+    info["points"] = near.size();
+    if (near.size() < 5) return std::nullopt;
+    Eigen::MatrixXd A(near.size(), 3);
+    Eigen::VectorXd y(near.size());
+    for (size_t i = 0; i < near.size(); ++i) {
+        const double u = near[i].first - xBest;
+        A.row(i) << 1, u, u * u;
+        y[i] = near[i].second;
+    }
+    const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
+    const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
+    info["coefficients"] = {coef[0], coef[1], coef[2]};
+    info["rms_residual"] = rms;
+    if (!(coef[2] > 0)) return std::nullopt;
+    const double u0 = -coef[1] / (2 * coef[2]);
+    const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
+    const double dE = std::max(2 * rms, 0.01 * std::abs(eMin));
+    const double half = std::sqrt(dE / coef[2]);
+    info["delta_E"] = dE;
+    info["x_min"] = xBest + u0;
+    return std::array<double, 2>{xBest + u0 - half, xBest + u0 + half};
+}
+
+struct FieldsSummary {
+    int frames = 0;
+    double meanGroundSpeed = 0;  // m/s, particles within 2 Δx above the ground plane, mean over frames
+    int groundFrames = 0;
+};
+
+// Re-simulates θ* at full resolution and writes OUT/fields/frame_%05d.vdb (surface, velocity,
+// pressure) for Blender, plus the mean flow speed of the liquid on the ground.
+FieldsSummary writeBestFields(const Job& job, const Observation& obs, const std::vector<double>& theta,
+                              const fs::path& dir) {
+    fs::create_directories(dir);
+    const Scene scene = sceneWithParameters(job, theta, job.resolution);
+    sim::Simulation simulation(scene);
+    int lastFrame = 0;
+    for (int f : obs.simFrames) lastFrame = std::max(lastFrame, f);
+    std::optional<double> ground;
+    for (const Solid& solid : scene.solids)
+        if (const auto* g = std::get_if<GroundSolid>(&solid)) ground = g->height;
+    FieldsSummary summary;
+    double speedSum = 0;
+    for (int frame = 0; frame <= lastFrame; ++frame) {
+        if (frame > 0) simulation.advanceFrame();
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%05d.vdb", frame);
+        surface::writeFrameVdb(dir / name, simulation,
+                               surface::liquidLevelSet(simulation.particles().position, scene.cellSize()));
+        ++summary.frames;
+        if (ground && frame > 0) {
+            double sum = 0;
+            int count = 0;
+            const auto& p = simulation.particles();
+            for (size_t i = 0; i < p.position.size(); ++i)
+                if (p.position[i].z() < *ground + 2 * scene.cellSize()) {
+                    sum += p.velocity[i].norm();
+                    ++count;
+                }
+            if (count > 0) {
+                speedSum += sum / count;
+                ++summary.groundFrames;
+            }
+        }
+    }
+    if (summary.groundFrames > 0) summary.meanGroundSpeed = speedSum / summary.groundFrames;
+    return summary;
+}
+
+}  // namespace
+
+IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const IdentifyOptions& options) {
+    const auto sessionStart = Clock::now();
+    fs::create_directories(outDir);
+    Job job = jobIn;
+    prepareReference(job, outDir, options.cancel);
+    const Observation obs = loadObservation(job);
+    const int n = static_cast<int>(job.parameters.size());
+    LogBounds bounds{Eigen::VectorXd(n), Eigen::VectorXd(n)};
+    Eigen::VectorXd x0(n), spread0(n);
+    for (int i = 0; i < n; ++i) {
+        const ParameterSpec& p = job.parameters[i];
+        bounds.lower[i] = std::log(p.lower);
+        bounds.upper[i] = std::log(p.upper);
+        x0[i] = std::log(p.initial);
+        const double range = bounds.upper[i] - bounds.lower[i];
+        spread0[i] = std::log1p(p.spread / p.initial);
+        if (range > 0) spread0[i] = std::min(spread0[i], range / 3);
+        spread0[i] = std::max(spread0[i], 1e-6);
+    }
+    const int fineRes = job.resolution, coarseRes = coarseResolution(job);
+    const double coarseTolerance = 0.02 + 10 * job.toleranceX;
+    const std::string print = fingerprint(job);
+    const fs::path checkpointFile = outDir / "checkpoint.json";
+
+    CmaEsSettings settings;
+    settings.populationSize = job.populationSize;
+    CmaEs es(x0, spread0, job.seed, settings);
+    int coarseEnd = plannedCoarseGenerations(job);
+    json evaluated = json::array(), generations = json::array();
+    double elapsedBefore = 0;
+    std::optional<StopReason> stop;
+    int resumedFrom = 0;
+    if (fs::exists(checkpointFile)) {
+        json cp;
+        try {
+            std::ifstream stream(checkpointFile);
+            cp = json::parse(stream);
+        } catch (const std::exception& e) {
+            throw InputError(checkpointFile.string() + ": unreadable checkpoint (" + e.what() +
+                             "); delete it or use another --out");
+        }
+        if (cp.value("fingerprint", "") != print)
+            throw InputError(checkpointFile.string() + ": checkpoint of a different job (or changed scene, camera, "
+                                                       "reference); use another --out or delete it");
+        es = CmaEs::fromJson(cp.at("cma"));
+        coarseEnd = cp.at("coarse_end").get<int>();
+        evaluated = cp.at("evaluated");
+        generations = cp.at("generations");
+        elapsedBefore = cp.at("elapsed_s").get<double>();
+        if (cp.contains("stop") && !cp.at("stop").is_null()) {
+            const std::string s = cp.at("stop").get<std::string>();
+            for (StopReason r : {StopReason::MaxGenerations, StopReason::ToleranceX, StopReason::ToleranceFun})
+                if (s == toString(r)) stop = r;
+            // A finished run continues when max_generations was raised.
+            if (stop == StopReason::MaxGenerations && es.generation() < job.maxGenerations) stop.reset();
+        }
+        resumedFrom = es.generation();
+    } else {
+        requireCameraSeesLiquid(job, coarseEnd > 0 ? coarseRes : fineRes);
+    }
+
+    std::optional<tbb::global_control> threadLimit;
+    if (options.threads > 0)
+        threadLimit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(options.threads));
+    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+
+    // Best at a resolution over the recorded evaluations.
+    auto bestAt = [&](int resolution) -> const json* {
+        const json* best = nullptr;
+        for (const json& e : evaluated)
+            if (e.at("resolution") == resolution && !e.at("E").is_null() &&
+                (!best || e.at("E").get<double>() < best->at("E").get<double>()))
+                best = &e;
+        return best;
+    };
+    auto maxStd = [&] { return es.standardDeviations().maxCoeff(); };
+    std::vector<double> genSecondsCoarse, genSecondsFine;
+    for (const json& g : generations)
+        (g.at("resolution") == fineRes ? genSecondsFine : genSecondsCoarse).push_back(g.at("seconds").get<double>());
+
+    auto checkpoint = [&](const Clock::time_point& now) {
+        json cp{{"format", "viscoscope.identify_checkpoint"},
+                {"version", 1},
+                {"fingerprint", print},
+                {"cma", es.toJson()},
+                {"coarse_end", coarseEnd},
+                {"evaluated", evaluated},
+                {"generations", generations},
+                {"elapsed_s", elapsedBefore + std::chrono::duration<double>(now - sessionStart).count()},
+                {"stop", stop ? json(toString(*stop)) : json()}};
+        writeJsonAtomically(cp, checkpointFile);
+    };
+
+    while (!stop) {
+        const int g = es.generation();
+        if (g >= job.maxGenerations) {
+            stop = StopReason::MaxGenerations;
+            checkpoint(Clock::now());
+            break;
+        }
+        const bool coarse = g < coarseEnd;
+        const int resolution = coarse ? coarseRes : fineRes;
+        const auto genStart = Clock::now();
+        const std::vector<Eigen::VectorXd> xs = es.ask();
+        std::vector<Evaluation> evals(xs.size());
+        std::vector<std::string> errors(xs.size());
+        arena.execute([&] {
+            tbb::parallel_for(0, static_cast<int>(xs.size()), 1, [&](int k) {
+                try {
+                    evals[k] = evaluate(job, obs, thetaOf(xs[k], bounds), resolution);
+                } catch (const InputError&) {
+                    throw;
+                } catch (const std::exception& e) {  // an unstable simulation ranks last, never aborts the run
+                    evals[k].theta = thetaOf(xs[k], bounds);
+                    evals[k].resolution = resolution;
+                    evals[k].E = INFINITY;
+                    errors[k] = e.what();
+                }
+            });
+        });
+        if (g == 0) {
+            double pixels = 0;
+            for (const Evaluation& e : evals) pixels += e.simulatedPixels;
+            if (pixels == 0)
+                throw InputError(job.cameraFile.string() + ": the camera sees no simulated liquid in any compared "
+                                                           "frame for any θ of the first generation");
+        }
+        std::vector<double> fitness(xs.size());
+        int bestK = 0;
+        for (size_t k = 0; k < xs.size(); ++k) {
+            fitness[k] = std::isfinite(evals[k].E) ? evals[k].E + boundPenalty(xs[k], bounds) : 1e30;
+            if (fitness[k] < fitness[bestK]) bestK = static_cast<int>(k);
+            json e{{"generation", g + 1},
+                   {"resolution", resolution},
+                   {"theta", vec(evals[k].theta)},
+                   {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
+                   {"E", std::isfinite(evals[k].E) ? json(evals[k].E) : json()},
+                   {"frame_E", vec(evals[k].frameE)},
+                   {"seconds", evals[k].seconds},
+                   {"simulation_s", evals[k].simulationSeconds},
+                   {"silhouette_s", evals[k].silhouetteSeconds}};
+            if (!errors[k].empty()) e["error"] = errors[k];
+            evaluated.push_back(e);
+        }
+        es.tell(xs, fitness);
+        const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
+        (coarse ? genSecondsCoarse : genSecondsFine).push_back(genSeconds);
+        const json* best = bestAt(resolution);
+        std::vector<double> meanTheta = thetaOf(es.mean(), bounds);
+        const Eigen::VectorXd sd = es.standardDeviations();
+        generations.push_back({{"generation", g + 1},
+                               {"resolution", resolution},
+                               {"generation_best_E", std::isfinite(evals[bestK].E) ? json(evals[bestK].E) : json()},
+                               {"generation_best_theta", vec(evals[bestK].theta)},
+                               {"best_E", best ? best->at("E") : json()},
+                               {"best_theta", best ? best->at("theta") : json()},
+                               {"mean_theta", vec(meanTheta)},
+                               {"sigma", es.sigma()},
+                               {"log_std", vec(std::vector<double>(sd.data(), sd.data() + sd.size()))},
+                               {"evaluations", es.evaluations()},
+                               {"seconds", genSeconds}});
+
+        // Phase switch and stopping rules, decided before the checkpoint so a resume agrees.
+        const int done = es.generation();
+        if (coarse && done < coarseEnd && maxStd() < coarseTolerance) coarseEnd = done;
+        if (coarse && done == coarseEnd) {
+            const double s = maxStd();
+            if (s < 0.1) {
+                json state = es.toJson();
+                state["sigma"] = es.sigma() * 0.1 / s;
+                es = CmaEs::fromJson(state);
+            }
+        }
+        const int fineDone = done - coarseEnd;
+        if (!coarse && fineDone >= job.fidelity.minFineGenerations) {
+            if (maxStd() < job.toleranceX) stop = StopReason::ToleranceX;
+            else {
+                const int window = std::min(fineDone, 10);
+                double lo = INFINITY, hi = -INFINITY;
+                for (int i = static_cast<int>(generations.size()) - window; i < static_cast<int>(generations.size()); ++i) {
+                    const json& v = generations[i].at("generation_best_E");
+                    if (v.is_null()) { hi = INFINITY; continue; }
+                    lo = std::min(lo, v.get<double>());
+                    hi = std::max(hi, v.get<double>());
+                }
+                if (fineDone >= 10 && hi - lo < job.toleranceFun) stop = StopReason::ToleranceFun;
+            }
+        }
+        if (!stop && done >= job.maxGenerations) stop = StopReason::MaxGenerations;
+        const auto now = Clock::now();
+        checkpoint(now);
+
+        if (options.onGeneration) {
+            GenerationReport report;
+            report.generation = done;
+            report.generations = job.maxGenerations;
+            report.evaluations = es.evaluations();
+            report.resolution = resolution;
+            if (best) report.bestTheta = best->at("theta").get<std::vector<double>>();
+            report.bestE = best ? best->at("E").get<double>() : NAN;
+            report.sigma = es.sigma();
+            report.elapsed = elapsedBefore + std::chrono::duration<double>(now - sessionStart).count();
+            auto mean = [](const std::vector<double>& v) {
+                double s = 0;
+                for (double x : v) s += x;
+                return v.empty() ? 0.0 : s / v.size();
+            };
+            const double fineGen = genSecondsFine.empty()
+                                       ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4)
+                                       : mean(genSecondsFine);
+            const int coarseLeft = std::max(0, coarseEnd - done);
+            report.remaining = stop ? 0.0
+                                    : coarseLeft * mean(genSecondsCoarse) +
+                                          (job.maxGenerations - std::max(done, coarseEnd)) * fineGen;
+            report.resumed = resumedFrom > 0 && done == resumedFrom + 1;
+            options.onGeneration(report);
+        }
+        if (!stop && options.cancel && *options.cancel) throw Cancelled("identification cancelled after generation " +
+                                                                        std::to_string(done) + "; checkpoint saved");
+    }
+
+    // ---- Results.
+    IdentificationResult result;
+    result.stop = *stop;
+    result.generations = es.generation();
+    result.evaluations = es.evaluations();
+    result.resumedFromGeneration = resumedFrom;
+    const json* best = bestAt(fineRes);
+    if (!best) best = bestAt(coarseRes);
+    if (!best) throw std::runtime_error("no successful evaluation");
+    result.theta = best->at("theta").get<std::vector<double>>();
+    result.E = best->at("E").get<double>();
+    const Eigen::VectorXd sd = es.standardDeviations();
+    json params = json::object();
+    for (int i = 0; i < n; ++i) {
+        const double xb = std::log(result.theta[i]);
+        // The final search distribution: exp(m ± 2σ√C_ii) (a 95 % band of CMA-ES's sampling law in log
+        // space, the spread it still considers plausible; not a statistical confidence interval).
+        const std::array<double, 2> cma{std::exp(clipped(es.mean()[i] - 2 * sd[i], bounds.lower[i], bounds.upper[i])),
+                                        std::exp(clipped(es.mean()[i] + 2 * sd[i], bounds.lower[i], bounds.upper[i]))};
+        json entry{{"value", result.theta[i]},
+                   {"cma_mean", std::exp(es.mean()[i])},
+                   {"cma_interval", cma},
+                   {"log_std", sd[i]}};
+        std::optional<std::array<double, 2>> profile;
+        if (n == 1) {
+            std::vector<std::pair<double, double>> points;
+            for (const json& e : evaluated)
+                if (e.at("resolution") == fineRes && !e.at("E").is_null())
+                    points.emplace_back(std::log(e.at("theta")[0].get<double>()), e.at("E").get<double>());
+            json info;
+            profile = profileInterval(points, xb, 0.5, info);
+            entry["profile_fit"] = info;
+            if (profile) entry["profile_interval"] = {std::exp((*profile)[0]), std::exp((*profile)[1])};
+        }
+        // The reported interval: the profile band when the fit is convex, else the CMA band; always
+        // widened to contain θ*.
+        std::array<double, 2> band = profile ? std::array<double, 2>{std::exp((*profile)[0]), std::exp((*profile)[1])}
+                                             : cma;
+        band[0] = std::min(band[0], result.theta[i]);
+        band[1] = std::max(band[1], result.theta[i]);
+        entry["interval"] = band;
+        entry["interval_method"] = profile ? "profile: parabola fit of E against ln θ over full-resolution "
+                                             "evaluations within ±0.5 of ln θ*, band where it is within "
+                                             "ΔE = max(2·RMS residual, 1 % E_min) of its minimum"
+                                           : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
+        result.interval.push_back(band);
+        if (i == 0) result.intervalMethod = profile ? "profile" : "cma";
+        params[job.parameters[i].name] = entry;
+    }
+    const double elapsed = elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count();
+    double evalSeconds = 0;
+    json perResolution = json::object();
+    for (const json& e : evaluated) {
+        evalSeconds += e.at("seconds").get<double>();
+        json& r = perResolution[std::to_string(e.at("resolution").get<int>())];
+        if (r.is_null()) r = {{"evaluations", 0}, {"seconds", 0.0}, {"simulation_s", 0.0}, {"silhouette_s", 0.0}};
+        r["evaluations"] = r.value("evaluations", 0) + 1;
+        r["simulation_s"] = r["simulation_s"].get<double>() + e.value("simulation_s", 0.0);
+        r["silhouette_s"] = r["silhouette_s"].get<double>() + e.value("silhouette_s", 0.0);
+        r["seconds"] = r.value("seconds", 0.0) + e.at("seconds").get<double>();
+    }
+    for (auto& [key, r] : perResolution.items()) r["mean_seconds"] = r["seconds"].get<double>() / r["evaluations"].get<int>();
+
+    json doc{{"format", "viscoscope.identify_result"},
+             {"version", 1},
+             {"job", job.file.string()},
+             {"parameters", params},
+             {"E", result.E},
+             {"stop", toString(result.stop)},
+             {"generations", result.generations},
+             {"evaluations", result.evaluations},
+             {"population", es.lambda()},
+             {"resolution", fineRes},
+             {"coarse_resolution", coarseRes},
+             {"coarse_generations", coarseEnd},
+             {"fidelity_policy", "generations 1.." + std::to_string(coarseEnd) + " at resolution " +
+                                     std::to_string(coarseRes) + ", the rest at " + std::to_string(fineRes) +
+                                     "; θ* is the best full-resolution evaluation"},
+             {"resumed_from_generation", resumedFrom},
+             {"history", generations},
+             {"evaluated", evaluated},
+             {"timings", {{"wall_s", elapsed}, {"evaluation_cpu_s", evalSeconds}, {"per_resolution", perResolution}}}};
+    if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
+    if (options.writeFields) {
+        const auto fieldsStart = Clock::now();
+        const FieldsSummary fields = writeBestFields(job, obs, result.theta, outDir / "fields");
+        doc["fields"] = {{"folder", "fields"},
+                         {"frames", fields.frames},
+                         {"mean_ground_speed_m_s", fields.groundFrames ? json(fields.meanGroundSpeed) : json()},
+                         {"seconds", std::chrono::duration<double>(Clock::now() - fieldsStart).count()}};
+    }
+    // Every evaluation as CSV for plotting.
+    {
+        std::ofstream csv(outDir / "evaluations.csv.partial");
+        csv << "generation,resolution";
+        for (const ParameterSpec& p : job.parameters) csv << "," << p.name;
+        csv << ",E,seconds\n";
+        csv << std::setprecision(17);
+        for (const json& e : evaluated) {
+            csv << e.at("generation").get<int>() << "," << e.at("resolution").get<int>();
+            for (const json& t : e.at("theta")) csv << "," << t.get<double>();
+            csv << ",";
+            if (e.at("E").is_null()) csv << "nan";
+            else csv << e.at("E").get<double>();
+            csv << "," << e.at("seconds").get<double>() << "\n";
+        }
+    }
+    fs::rename(outDir / "evaluations.csv.partial", outDir / "evaluations.csv");
+    result.seconds = elapsed;
+    result.document = doc;
+    writeJsonAtomically(doc, outDir / "result.json");
+    return result;
+}
+
+}  // namespace viscoscope::identify

@@ -1,0 +1,217 @@
+// The identify stage: CMA-ES (Hansen, arXiv:1604.00772) over forward simulations, the job file,
+// the identification loop with multi-fidelity, checkpoints and results.
+//
+// Parameters are searched in log space: the optimizer sees x = ln θ, so θ = exp(x) > 0 always;
+// bounds [min, max] become [ln min, ln max] and a sample outside them is clipped to the boundary
+// for evaluation (the CMA-ES state keeps the unclipped sample; the objective gets a quadratic
+// penalty on the clipped distance, as in pycma's BoundPenalty, so the mean is pulled back inside).
+#pragma once
+
+#include "observe/observe.h"
+#include "scene/scene.h"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace viscoscope::identify {
+
+// ---------------------------------------------------------------------------------------------
+// CMA-ES with Hansen's default strategy parameters (Table 1 of the tutorial), ask/tell.
+
+struct CmaEsSettings {
+    int populationSize = 0;  // λ; 0 = 4 + ⌊3 ln n⌋
+};
+
+class CmaEs {
+public:
+    CmaEs(const Eigen::VectorXd& initialMean, double initialSigma, std::uint64_t seed,
+          const CmaEsSettings& settings = {});
+    // With per-coordinate spreads: σ = 1 and C = diag(spread²)... expressed as σ0 = max spread and
+    // C = diag((spread/σ0)²).
+    CmaEs(const Eigen::VectorXd& initialMean, const Eigen::VectorXd& initialSpreads, std::uint64_t seed,
+          const CmaEsSettings& settings = {});
+
+    // λ candidates x_k = m + σ B D z_k, z_k ~ N(0, I). Deterministic given the seed and history.
+    std::vector<Eigen::VectorXd> ask();
+    // Fitness of the candidates returned by the last ask(), in the same order (minimized).
+    void tell(const std::vector<Eigen::VectorXd>& candidates, const std::vector<double>& fitness);
+
+    int dimension() const { return n_; }
+    int lambda() const { return lambda_; }
+    int mu() const { return mu_; }
+    double muEff() const { return muEff_; }
+    const Eigen::VectorXd& weights() const { return weights_; }
+    const Eigen::VectorXd& mean() const { return mean_; }
+    double sigma() const { return sigma_; }
+    const Eigen::MatrixXd& covariance() const { return C_; }
+    int generation() const { return generation_; }
+    long evaluations() const { return evaluations_; }
+    // σ·sqrt(C_ii): the standard deviation of the search distribution per coordinate.
+    Eigen::VectorXd standardDeviations() const;
+    // Learning rates (for tests and the report).
+    double cSigma() const { return cSigma_; }
+    double dSigma() const { return dSigma_; }
+    double cC() const { return cC_; }
+    double c1() const { return c1_; }
+    double cMu() const { return cMu_; }
+
+    // The complete state (strategy parameters are recomputed from n and λ); from/to JSON for
+    // checkpoints. Doubles round-trip exactly (17 significant digits).
+    nlohmann::json toJson() const;
+    static CmaEs fromJson(const nlohmann::json& state);
+
+private:
+    void setStrategyParameters();
+    void updateEigenDecomposition();
+    double standardNormal();
+
+    int n_ = 0, lambda_ = 0, mu_ = 0;
+    Eigen::VectorXd weights_;
+    double muEff_ = 0, cSigma_ = 0, dSigma_ = 0, cC_ = 0, c1_ = 0, cMu_ = 0, chiN_ = 0;
+    Eigen::VectorXd mean_, pSigma_, pC_;
+    Eigen::MatrixXd C_, B_;
+    Eigen::VectorXd D_;  // sqrt of C's eigenvalues
+    double sigma_ = 1;
+    int generation_ = 0;
+    long evaluations_ = 0;
+    std::uint64_t seed_ = 0;
+    std::mt19937_64 random_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// The job file (format "viscoscope.job", version 1), as addon/operators/identify.py writes it.
+
+struct ParameterSpec {
+    std::string name;       // "viscosity" (material.viscosity) or "surface_tension"
+    double initial = 10;    // θ0 (SI)
+    double spread = 10;     // initial spread in θ units, converted to log space: σ0 = ln(1 + spread/θ0)
+    double lower = 1e-3, upper = 1e4;
+};
+
+struct FidelitySchedule {
+    // Generations [0, coarseGenerations) simulate at round(coarseFactor · resolution); the rest at
+    // the job's resolution. The coarse phase ends early when its σ tolerance is met. At the switch
+    // the CMA-ES state is kept (mean, σ, C, paths) and the best-so-far is reset, because E values of
+    // the two fidelities are not comparable. Stopping tolerances apply only at full resolution, and
+    // at least `minFineGenerations` run there.
+    double coarseFactor = 0.66;
+    int coarseGenerations = -1;  // −1 = ⌊maxGenerations / 2⌋ capped at 10; 0 = no coarse phase
+    int minFineGenerations = 3;
+};
+
+struct Job {
+    std::filesystem::path file;
+    Scene scene;
+    std::filesystem::path cameraFile;
+    PinholeCamera camera;
+    std::filesystem::path referenceDir;          // the `extract` manifest folder
+    std::optional<std::filesystem::path> video;  // extracted into OUT/reference when no silhouettes
+    std::optional<std::filesystem::path> trackCsv;
+    double trackWeight = 1;
+    double timeOffset = 0;  // simulation time of reference time 0 (s)
+    int lastSourceFrame = 1000000;  // frame_end − frame_start: later reference frames are ignored
+    std::vector<ParameterSpec> parameters;
+    int resolution = 32;
+    int maxGenerations = 80;
+    std::uint64_t seed = 1;
+    int populationSize = 0;  // 0 = CMA-ES default
+    double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (≈ 0.1 % in θ)
+    double toleranceFun = 1e-9; // ... or when best E over the last 10 fine generations changes < this
+    int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
+    bool exactSilhouettes = false;  // mesh + fill instead of the fast band splat
+    FidelitySchedule fidelity;
+    nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
+};
+
+// Parses and validates everything needed before the first simulation; throws InputError naming
+// the file and the field. Relative paths resolve against the job file's folder.
+Job parseJob(const nlohmann::json& doc, const std::string& origin, const std::filesystem::path& baseDir);
+Job loadJob(const std::filesystem::path& file);
+
+// ---------------------------------------------------------------------------------------------
+// One evaluation: simulate with θ at a resolution, silhouettes through the camera, E = Σ ω_f E_f.
+
+struct Observation {
+    ReferenceManifest reference;
+    std::vector<cv::Mat1b> masks;  // per reference frame (empty Mat where ω_f = 0)
+    cv::Mat1b compared;            // C_f (empty = all pixels)
+    std::vector<int> simFrames;    // the simulation frame matched to each reference frame
+    std::optional<ScalarTrack> track;
+};
+
+// When the job names a video but no extracted silhouettes, extracts them into OUT/reference (once;
+// a finished extraction is reused) and points job.referenceDir there.
+void prepareReference(Job& job, const std::filesystem::path& outDir, const std::atomic<bool>* cancel = nullptr);
+
+// Loads the reference (checking image size against the camera and that frames remain) and maps
+// reference times onto simulation frames.
+Observation loadObservation(const Job& job);
+
+struct Evaluation {
+    std::vector<double> theta;
+    int resolution = 0;
+    double E = 0;
+    std::vector<double> frameE;
+    double simulatedPixels = 0;  // total silhouette area over frames (0 = the camera saw nothing)
+    double seconds = 0;
+    double simulationSeconds = 0, silhouetteSeconds = 0;  // where the time went
+};
+
+Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution);
+Evaluation evaluate(const Job& job, const Observation& observation, const std::vector<double>& theta,
+                    int resolution, const std::atomic<bool>* cancel = nullptr);
+
+// ---------------------------------------------------------------------------------------------
+// The loop.
+
+struct GenerationReport {
+    int generation = 0, generations = 0;
+    long evaluations = 0;
+    int resolution = 0;
+    std::vector<double> bestTheta;
+    double bestE = 0;
+    double sigma = 0;
+    double elapsed = 0, remaining = 0;
+    bool resumed = false;
+};
+
+enum class StopReason { MaxGenerations, ToleranceX, ToleranceFun, Cancelled };
+const char* toString(StopReason reason);
+
+struct IdentificationResult {
+    std::vector<double> theta;
+    std::vector<std::array<double, 2>> interval;
+    std::string intervalMethod;
+    double E = 0;
+    StopReason stop = StopReason::MaxGenerations;
+    int generations = 0;
+    long evaluations = 0;
+    int resumedFromGeneration = 0;
+    double seconds = 0;
+    nlohmann::json document;  // what result.json holds
+};
+
+struct IdentifyOptions {
+    int threads = 0;  // 0 = all cores (tbb default)
+    std::function<void(const GenerationReport&)> onGeneration;
+    const std::atomic<bool>* cancel = nullptr;
+    bool writeFields = true;  // the best simulation's last frame .vdb into OUT/fields
+};
+
+// Runs (or resumes from OUT/checkpoint.json) the identification and writes OUT/result.json,
+// OUT/evaluations.csv. On cancel: finishes the current generation's evaluations, checkpoints and
+// throws Cancelled. A checkpoint of a different job throws InputError.
+IdentificationResult identify(const Job& job, const std::filesystem::path& outDir, const IdentifyOptions& options = {});
+
+// Atomic JSON write: FILE.partial, fsync-free rename.
+void writeJsonAtomically(const nlohmann::json& doc, const std::filesystem::path& file);
+
+}  // namespace viscoscope::identify

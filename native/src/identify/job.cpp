@@ -1,0 +1,217 @@
+// The job file ("viscoscope.job", version 1): what addon/operators/identify.py `write_job` writes,
+// plus optional fields for the loop. Validated up front so a bad job fails before any simulation.
+#include "identify/identify.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <set>
+
+namespace viscoscope::identify {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string num(double x) {
+    char text[32];
+    std::snprintf(text, sizeof text, "%g", x);
+    return text;
+}
+
+fs::path resolve(const fs::path& base, const std::string& value) {
+    const fs::path p(value);
+    return p.is_absolute() || base.empty() ? p : base / p;
+}
+
+double finiteNumber(const nlohmann::json& doc, const std::string& key, const std::string& origin) {
+    if (!doc.contains(key)) throw InputError(origin + ": " + key + ": missing");
+    const nlohmann::json& value = doc.at(key);
+    if (!value.is_number()) throw InputError(origin + ": " + key + ": must be a number");
+    const double x = value.get<double>();
+    if (!std::isfinite(x)) throw InputError(origin + ": " + key + ": must be finite, got " + value.dump());
+    return x;
+}
+
+double optionalNumber(const nlohmann::json& doc, const std::string& key, double fallback, const std::string& origin) {
+    if (!doc.contains(key) || doc.at(key).is_null()) return fallback;
+    return finiteNumber(doc, key, origin);
+}
+
+int optionalInt(const nlohmann::json& doc, const std::string& key, int fallback, int minimum,
+                const std::string& origin) {
+    if (!doc.contains(key) || doc.at(key).is_null()) return fallback;
+    const nlohmann::json& value = doc.at(key);
+    if (!value.is_number_integer()) throw InputError(origin + ": " + key + ": must be an integer");
+    const long long v = value.get<long long>();
+    if (v < minimum || v > 1000000000)
+        throw InputError(origin + ": " + key + ": must be ≥ " + std::to_string(minimum) + ", got " + value.dump());
+    return static_cast<int>(v);
+}
+
+std::optional<std::string> optionalString(const nlohmann::json& doc, const std::string& key, const std::string& origin) {
+    if (!doc.contains(key) || doc.at(key).is_null()) return std::nullopt;
+    if (!doc.at(key).is_string() || doc.at(key).get<std::string>().empty())
+        throw InputError(origin + ": " + key + ": must be a non-empty string");
+    return doc.at(key).get<std::string>();
+}
+
+// A bound under either spelling: the add-on writes min/max, the design says lower/upper.
+double bound(const nlohmann::json& p, const char* a, const char* b, double fallback, const std::string& where) {
+    if (p.contains(a) && !p.at(a).is_null()) return finiteNumber(p, a, where);
+    if (p.contains(b) && !p.at(b).is_null()) return finiteNumber(p, b, where);
+    return fallback;
+}
+
+ParameterSpec parseParameter(const nlohmann::json& p, const std::string& where) {
+    if (!p.is_object()) throw InputError(where + ": must be an object");
+    ParameterSpec spec;
+    const auto name = optionalString(p, "name", where);
+    if (!name) throw InputError(where + ".name: missing");
+    spec.name = *name;
+    if (spec.name != "viscosity" && spec.name != "surface_tension")
+        throw InputError(where + ".name: \"" + spec.name + "\" is not supported (viscosity, surface_tension)");
+    const double defaultInitial = spec.name == "viscosity" ? 10.0 : 0.05;
+    spec.initial = optionalNumber(p, "initial", defaultInitial, where);
+    spec.spread = optionalNumber(p, "spread", spec.initial, where);
+    spec.lower = bound(p, "min", "lower", spec.name == "viscosity" ? 1e-3 : 1e-4, where);
+    spec.upper = bound(p, "max", "upper", spec.name == "viscosity" ? 1e4 : 1.0, where);
+    if (p.contains("log") && p.at("log") != nlohmann::json(true))
+        throw InputError(where + ".log: only log-space search is supported (log: true)");
+    if (spec.lower <= 0) throw InputError(where + ".min: must be > 0 (the search is in log space), got " + num(spec.lower));
+    if (spec.lower > spec.upper)
+        throw InputError(where + ": bounds: lower " + num(spec.lower) + " > upper " + num(spec.upper));
+    if (spec.initial < spec.lower || spec.initial > spec.upper)
+        throw InputError(where + ".initial: " + num(spec.initial) + " is outside the bounds [" +
+                         num(spec.lower) + ", " + num(spec.upper) + "]");
+    if (spec.spread <= 0) throw InputError(where + ".spread: must be > 0");
+    return spec;
+}
+
+}  // namespace
+
+Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
+    if (!doc.is_object()) throw InputError(origin + ": must be a JSON object");
+    if (doc.value("format", nlohmann::json()) != nlohmann::json("viscoscope.job"))
+        throw InputError(origin + ": format: expected \"viscoscope.job\"");
+    if (doc.value("version", nlohmann::json()) != nlohmann::json(1))
+        throw InputError(origin + ": version: expected 1, got " + doc.value("version", nlohmann::json()).dump());
+    Job job;
+    job.document = doc;
+
+    // The scene: a path, or the scene object inline.
+    if (!doc.contains("scene")) throw InputError(origin + ": scene: missing");
+    if (doc.at("scene").is_string()) job.scene = loadScene(resolve(baseDir, doc.at("scene").get<std::string>()));
+    else if (doc.at("scene").is_object()) job.scene = parseScene(doc.at("scene"), origin + ": scene", baseDir);
+    else throw InputError(origin + ": scene: must be a path or an object");
+
+    if (!doc.contains("camera")) throw InputError(origin + ": camera: missing");
+    if (doc.at("camera").is_string()) {
+        job.cameraFile = resolve(baseDir, doc.at("camera").get<std::string>());
+        job.camera = loadCamera(job.cameraFile);
+    } else if (doc.at("camera").is_object()) {
+        job.cameraFile = origin + ": camera";
+        job.camera = parseCamera(doc.at("camera"), origin + ": camera");
+    } else {
+        throw InputError(origin + ": camera: must be a path or an object");
+    }
+
+    // The reference: an extracted manifest folder ("silhouettes", or "reference"), else the video,
+    // which identify() extracts into OUT/reference first.
+    std::optional<std::string> silhouettes = optionalString(doc, "silhouettes", origin);
+    if (!silhouettes) silhouettes = optionalString(doc, "reference", origin);
+    if (silhouettes) job.referenceDir = resolve(baseDir, *silhouettes);
+    if (const auto video = optionalString(doc, "video", origin)) job.video = resolve(baseDir, *video);
+    if (!silhouettes && !job.video) throw InputError(origin + ": silhouettes: missing (and no video to extract)");
+    if (!silhouettes && !fs::exists(*job.video))
+        throw InputError(origin + ": video: " + job.video->string() + " not found");
+    if (silhouettes && !fs::exists(job.referenceDir / "manifest.json"))
+        throw InputError(origin + ": silhouettes: " + (job.referenceDir / "manifest.json").string() + " not found");
+
+    if (doc.contains("track") && !doc.at("track").is_null()) {
+        const nlohmann::json& track = doc.at("track");
+        const std::string where = origin + ": track";
+        if (track.is_string()) job.trackCsv = resolve(baseDir, track.get<std::string>());
+        else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
+            job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
+            job.trackWeight = optionalNumber(track, "weight", 1.0, where);
+            if (job.trackWeight < 0) throw InputError(where + ".weight: must be ≥ 0");
+        } else throw InputError(where + ": must be a CSV path or {\"csv\": path, \"weight\": w}");
+        if (!fs::exists(*job.trackCsv)) throw InputError(where + ": " + job.trackCsv->string() + " not found");
+    }
+
+    // Blender's frame_start is simulation time 0 and video frame 0; frames after frame_end are ignored.
+    const int frameStart = optionalInt(doc, "frame_start", 0, -1000000, origin);
+    const int frameEnd = optionalInt(doc, "frame_end", frameStart + 1000000, -1000000, origin);
+    if (frameEnd < frameStart) throw InputError(origin + ": frame_end: before frame_start");
+    job.maxFrames = optionalInt(doc, "max_frames", 0, 0, origin);
+    job.timeOffset = optionalNumber(doc, "time_offset_s", 0.0, origin);
+    job.lastSourceFrame = frameEnd - frameStart;
+
+    if (!doc.contains("parameters") || !doc.at("parameters").is_array() || doc.at("parameters").empty())
+        throw InputError(origin + ": parameters: must be a non-empty array");
+    std::set<std::string> names;
+    for (size_t i = 0; i < doc.at("parameters").size(); ++i) {
+        ParameterSpec spec = parseParameter(doc.at("parameters").at(i), origin + ": parameters[" + std::to_string(i) + "]");
+        if (!names.insert(spec.name).second)
+            throw InputError(origin + ": parameters[" + std::to_string(i) + "].name: \"" + spec.name + "\" twice");
+        job.parameters.push_back(spec);
+    }
+
+    job.resolution = optionalInt(doc, "resolution", job.scene.domain.resolution, 4, origin);
+    job.maxGenerations = optionalInt(doc, "max_generations", 80, 1, origin);
+    job.seed = static_cast<std::uint64_t>(optionalInt(doc, "seed", 1, 0, origin));
+    job.populationSize = optionalInt(doc, "population", 0, 0, origin);
+    if (job.populationSize == 1) throw InputError(origin + ": population: must be ≥ 2 (or 0 for the default)");
+    job.toleranceX = optionalNumber(doc, "tolerance_x", job.toleranceX, origin);
+    job.toleranceFun = optionalNumber(doc, "tolerance_fun", job.toleranceFun, origin);
+    if (job.toleranceX < 0 || job.toleranceFun < 0) throw InputError(origin + ": tolerance_x/tolerance_fun: must be ≥ 0");
+    if (doc.contains("silhouette_method")) {
+        const auto method = optionalString(doc, "silhouette_method", origin);
+        if (*method != "fast" && *method != "exact")
+            throw InputError(origin + ": silhouette_method: expected \"fast\" or \"exact\"");
+        job.exactSilhouettes = *method == "exact";
+    }
+    if (doc.contains("fidelity") && !doc.at("fidelity").is_null()) {
+        const nlohmann::json& f = doc.at("fidelity");
+        const std::string where = origin + ": fidelity";
+        if (!f.is_object()) throw InputError(where + ": must be an object");
+        job.fidelity.coarseFactor = optionalNumber(f, "coarse_factor", job.fidelity.coarseFactor, where);
+        if (job.fidelity.coarseFactor <= 0 || job.fidelity.coarseFactor > 1)
+            throw InputError(where + ".coarse_factor: must be in (0, 1]");
+        job.fidelity.coarseGenerations = optionalInt(f, "coarse_generations", -1, -1, where);
+        job.fidelity.minFineGenerations = optionalInt(f, "min_fine_generations", 3, 1, where);
+    }
+    // Check the reference against the camera now, before any simulation.
+    if (silhouettes) {
+        const ReferenceManifest reference = loadReferenceManifest(job.referenceDir);
+        if (reference.width != job.camera.width || reference.height != job.camera.height)
+            throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
+                             std::to_string(job.camera.height) + ", reference masks in " + job.referenceDir.string() +
+                             " are " + std::to_string(reference.width) + "x" + std::to_string(reference.height));
+    }
+    return job;
+}
+
+Job loadJob(const fs::path& file) {
+    std::ifstream stream(file);
+    if (!stream) throw InputError(file.string() + ": cannot open the job file");
+    nlohmann::json doc;
+    try {
+        doc = nlohmann::json::parse(stream);
+    } catch (const nlohmann::json::out_of_range& e) {
+        throw InputError(file.string() + ": a non-finite number (" + std::string(e.what()) + ")");
+    } catch (const nlohmann::json::exception& e) {
+        throw InputError(file.string() + ": not valid JSON (" + std::string(e.what()) + ")");
+    }
+    Job job;
+    try {
+        job = parseJob(doc, file.string(), file.parent_path());
+    } catch (const nlohmann::json::exception& e) {
+        throw InputError(file.string() + ": wrong field type (" + std::string(e.what()) + ")");
+    }
+    job.file = file;
+    return job;
+}
+
+}  // namespace viscoscope::identify

@@ -1,0 +1,313 @@
+// `viscoscope identify` as the add-on runs it: bad jobs fail fast with exit 2 and one line; a run
+// killed with SIGKILL between generations resumes to the same result as an uninterrupted run;
+// SIGTERM checkpoints and exits 3; progress is JSON lines with the fields the add-on reads.
+// Tiny problem: 16³ (coarse 11³) grid, 2–3 reference frames, λ = 4, 2–3 generations. The reference
+// masks here are hand-drawn PGM rectangles (this test links no OpenCV); identify_loop_test checks
+// the recovered viscosity on a simulated reference.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+std::string slurp(const fs::path& file) {
+    std::ifstream stream(file);
+    std::stringstream text;
+    text << stream.rdbuf();
+    return text.str();
+}
+
+struct CommandResult {
+    int exitCode;
+    std::string out, err;
+};
+
+class CliIdentify : public ::testing::Test {
+protected:
+    void SetUp() override {
+        const std::string test = ::testing::UnitTest::GetInstance()->current_test_info()->name();
+        dir_ = fs::temp_directory_path() / ("viscoscope_cli_identify_" + test + "_" + std::to_string(getpid()));
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+        const json scene{{"format", "viscoscope.scene"},
+                         {"version", 1},
+                         {"domain", {{"min", {0, 0, 0}}, {"max", {0.1, 0.04, 0.06}}, {"resolution", 16}}},
+                         {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
+                         {"liquids", {{{"type", "box"}, {"min", {0.0, 0.0, 0.0}}, {"max", {0.035, 0.04, 0.045}}}}},
+                         {"material", {{"density", 1400}, {"viscosity", 5.0}}},
+                         {"fps", 30},
+                         {"frames", 4},
+                         {"seed", 1}};
+        std::ofstream(dir_ / "scene.json") << scene.dump(1);
+        writeCamera(dir_ / "camera.json", {-0.05, 0.03, 0.25});
+        writeReference(dir_ / "reference", 96, 64, {1.0, 1.0});
+    }
+    void TearDown() override { fs::remove_all(dir_); }
+
+    static void writeCamera(const fs::path& file, const std::vector<double>& t) {
+        const json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 64},
+                          {"K", {{200, 0, 47.5}, {0, 200, 25.5}, {0, 0, 1}}},
+                          {"distortion", {0, 0, 0, 0, 0}},
+                          {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
+                          {"t", t}};
+        std::ofstream(file) << camera.dump();
+    }
+
+    // Masks of a liquid block slumping to the right, as binary PGM (P5) files, frames 2 and 4.
+    static void writeReference(const fs::path& dir, int width, int height, const std::vector<double>& weights) {
+        fs::create_directories(dir / "masks");
+        json manifest{{"format", "viscoscope.reference"}, {"version", 1}, {"source", "hand-drawn"}, {"fps", 30.0},
+                      {"width", width}, {"height", height}};
+        std::vector<int> frames;
+        std::vector<double> times;
+        std::vector<std::string> masks;
+        for (size_t i = 0; i < weights.size(); ++i) {
+            const int frame = 2 * static_cast<int>(i + 1);
+            const std::string name = "masks/mask_" + std::to_string(frame) + ".pgm";
+            std::ofstream pgm(dir / name, std::ios::binary);
+            pgm << "P5\n" << width << " " << height << "\n255\n";
+            for (int y = 0; y < height; ++y)
+                for (int x = 0; x < width; ++x) {
+                    const bool inside = x > width * 0.2 && x < width * (0.5 + 0.05 * frame) && y > height * 0.4 &&
+                                        y < height * 0.75;
+                    pgm.put(static_cast<char>(inside ? 255 : 0));
+                }
+            frames.push_back(frame);
+            times.push_back(frame / 30.0);
+            masks.push_back(name);
+        }
+        manifest["frames"] = frames;
+        manifest["times_s"] = times;
+        manifest["weights"] = weights;
+        manifest["masks"] = masks;
+        std::ofstream(dir / "manifest.json") << manifest.dump(1);
+    }
+
+    json job(int generations = 2) const {
+        return {{"format", "viscoscope.job"},
+                {"version", 1},
+                {"scene", "scene.json"},
+                {"camera", "camera.json"},
+                {"video", nullptr},
+                {"silhouettes", "reference"},
+                {"frame_start", 1},
+                {"frame_end", 250},
+                {"parameters", {{{"name", "viscosity"}, {"initial", 5.0}, {"spread", 5.0}, {"min", 1e-3}, {"max", 1e4},
+                                 {"log", true}}}},
+                {"resolution", 16},
+                {"max_generations", generations},
+                {"fidelity", {{"coarse_generations", 1}}},
+                {"seed", 4}};
+    }
+
+    fs::path writeJob(const json& doc, const std::string& name = "job.json") const {
+        std::ofstream(dir_ / name) << doc.dump(1);
+        return dir_ / name;
+    }
+    fs::path writeJobText(const std::string& text, const std::string& name) const {
+        std::ofstream(dir_ / name) << text;
+        return dir_ / name;
+    }
+
+    CommandResult run(const std::string& arguments) const {
+        const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir_ / "stdout").string() +
+                                    " 2> " + (dir_ / "stderr").string();
+        const int status = std::system(command.c_str());
+        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir_ / "stdout"), slurp(dir_ / "stderr")};
+    }
+
+    // Starts identify in the background on one thread (the foreground runs use all cores, so a resumed
+    // run that matches an uninterrupted one also shows the result does not depend on the thread count).
+    pid_t start(const fs::path& jobFile, const fs::path& out) const {
+        const pid_t pid = fork();
+        if (pid == 0) {
+            const std::string log = (dir_ / "background.out").string();
+            freopen(log.c_str(), "w", stdout);
+            freopen((dir_ / "background.err").string().c_str(), "w", stderr);
+            execl(VISCOSCOPE_CLI, VISCOSCOPE_CLI, "identify", jobFile.c_str(), "--out", out.c_str(), "--progress",
+                  "json", "--no-plots", "--no-fields", "--threads", "1", static_cast<char*>(nullptr));
+            _exit(127);
+        }
+        return pid;
+    }
+
+    // Waits until OUT/checkpoint.json holds at least `generation` finished generations.
+    static bool waitForGeneration(const fs::path& out, int generation, pid_t pid) {
+        for (int i = 0; i < 60000; ++i) {
+            if (fs::exists(out / "checkpoint.json")) {
+                try {
+                    const json cp = json::parse(slurp(out / "checkpoint.json"));
+                    if (cp.at("cma").at("generation").get<int>() >= generation) return true;
+                } catch (const std::exception&) {
+                }
+            }
+            int status = 0;
+            if (waitpid(pid, &status, WNOHANG) == pid) return false;  // ended early
+            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        return false;
+    }
+
+    void expectBadInput(const fs::path& jobFile, const std::string& fragment) const {
+        const CommandResult r = run("identify " + jobFile.string() + " --out " + (dir_ / "out_bad").string() +
+                                    " --progress json --no-plots --no-fields");
+        EXPECT_EQ(r.exitCode, 2) << jobFile << ": " << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << "stderr: " << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "stderr: " << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / "out_bad" / "result.json"));
+        std::printf("[ bad job  ] %s\n", r.err.substr(0, r.err.size() - 1).c_str());
+    }
+
+    fs::path dir_;
+};
+
+TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
+    {  // no reference frames: all ω_f = 0
+        writeReference(dir_ / "reference_unweighted", 96, 64, {0.0, 0.0});
+        json doc = job();
+        doc["silhouettes"] = "reference_unweighted";
+        expectBadInput(writeJob(doc, "no_frames.json"), "no reference frames");
+    }
+    {  // bounds lower > upper
+        json doc = job();
+        doc["parameters"][0]["min"] = 100.0;
+        doc["parameters"][0]["max"] = 10.0;
+        expectBadInput(writeJob(doc, "bounds.json"), "lower 100 > upper 10");
+    }
+    {  // non-finite: 1e999 parses as infinity
+        std::string text = job().dump();
+        const std::string initial = "\"initial\":5.0";
+        text.replace(text.find(initial), initial.size(), "\"initial\":1e999");
+        expectBadInput(writeJobText(text, "infinite.json"), "non-finite");
+        std::string nan = job().dump();
+        nan.replace(nan.find("\"spread\":5.0"), 12, "\"spread\":NaN");
+        expectBadInput(writeJobText(nan, "nan.json"), "not valid JSON");
+    }
+    {  // the reference image has another size than the camera
+        writeReference(dir_ / "reference_small", 48, 32, {1.0, 1.0});
+        json doc = job();
+        doc["silhouettes"] = "reference_small";
+        expectBadInput(writeJob(doc, "size.json"), "reference masks");
+    }
+    {  // a camera that sees no liquid (it is behind the camera)
+        writeCamera(dir_ / "camera_away.json", {-0.05, 0.03, -0.25});
+        json doc = job();
+        doc["camera"] = "camera_away.json";
+        expectBadInput(writeJob(doc, "away.json"), "sees none of the liquid");
+    }
+    {  // an unsupported format
+        json doc = job();
+        doc["format"] = "viscoscope.scene";
+        expectBadInput(writeJob(doc, "format.json"), "format");
+    }
+}
+
+TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {
+    const fs::path jobFile = writeJob(job(3));
+    const auto t0 = std::chrono::steady_clock::now();
+    const CommandResult whole = run("identify " + jobFile.string() + " --out " + (dir_ / "whole").string() +
+                                    " --progress json --no-fields");
+    const double wholeSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_EQ(whole.exitCode, 0) << whole.err;
+    // Progress lines carry what the add-on reads.
+    std::istringstream lines(whole.out);
+    int progressLines = 0;
+    for (std::string line; std::getline(lines, line);) {
+        const json event = json::parse(line);
+        if (event.at("event") != "progress") continue;
+        ++progressLines;
+        for (const char* key : {"generation", "generations", "evaluations", "best_eta", "best_E", "sigma", "elapsed", "eta"})
+            EXPECT_TRUE(event.contains(key)) << key << " missing in " << line;
+    }
+    EXPECT_EQ(progressLines, 3);
+    const json a = json::parse(slurp(dir_ / "whole" / "result.json"));
+    EXPECT_TRUE(a.at("viscosity").contains("value"));
+    EXPECT_EQ(a.at("viscosity").at("interval").size(), 2u);
+    if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") == 0) {
+        EXPECT_TRUE(fs::exists(dir_ / "whole" / "convergence.png"));
+        EXPECT_TRUE(fs::exists(dir_ / "whole" / "landscape.png"));
+    }
+
+    // Kill -9 once the first generation is checkpointed, then run the same job again.
+    const fs::path out = dir_ / "killed";
+    const pid_t pid = start(jobFile, out);
+    ASSERT_TRUE(waitForGeneration(out, 1, pid)) << slurp(dir_ / "background.err");
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFSIGNALED(status));
+    EXPECT_FALSE(fs::exists(out / "result.json"));
+    const CommandResult resumed = run("identify " + jobFile.string() + " --out " + out.string() +
+                                      " --progress json --no-plots --no-fields");
+    ASSERT_EQ(resumed.exitCode, 0) << resumed.err;
+    const json b = json::parse(slurp(out / "result.json"));
+    std::printf("[ resume   ] killed after generation %d; eta %.6g (uninterrupted %.6g), E %.6g vs %.6g; "
+                "uninterrupted run %.1f s\n",
+                b.at("resumed_from_generation").get<int>(), b.at("viscosity").at("value").get<double>(),
+                a.at("viscosity").at("value").get<double>(), b.at("E").get<double>(), a.at("E").get<double>(),
+                wholeSeconds);
+    EXPECT_GE(b.at("resumed_from_generation").get<int>(), 1);
+    EXPECT_EQ(b.at("viscosity").at("value"), a.at("viscosity").at("value"));
+    EXPECT_EQ(b.at("E"), a.at("E"));
+    EXPECT_EQ(b.at("evaluations"), a.at("evaluations"));
+    ASSERT_EQ(b.at("evaluated").size(), a.at("evaluated").size());
+    for (size_t i = 0; i < a.at("evaluated").size(); ++i) {
+        EXPECT_EQ(b["evaluated"][i]["theta"], a["evaluated"][i]["theta"]);
+        EXPECT_EQ(b["evaluated"][i]["E"], a["evaluated"][i]["E"]);
+    }
+}
+
+TEST_F(CliIdentify, SigtermCheckpointsAndExits3ThenResumes) {
+    const fs::path jobFile = writeJob(job(3));
+    const fs::path out = dir_ / "out";
+    const pid_t pid = start(jobFile, out);
+    ASSERT_TRUE(waitForGeneration(out, 1, pid)) << slurp(dir_ / "background.err");
+    kill(pid, SIGTERM);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 3) << slurp(dir_ / "background.err");
+    const json cp = json::parse(slurp(out / "checkpoint.json"));
+    const int saved = cp.at("cma").at("generation").get<int>();
+    EXPECT_GE(saved, 1);
+    EXPECT_LT(saved, 3);
+    EXPECT_NE(slurp(dir_ / "background.out").find("\"cancelled\""), std::string::npos);
+    const CommandResult resumed = run("identify " + jobFile.string() + " --out " + out.string() +
+                                      " --progress json --no-plots --no-fields");
+    EXPECT_EQ(resumed.exitCode, 0) << resumed.err;
+    EXPECT_EQ(json::parse(slurp(out / "result.json")).at("resumed_from_generation").get<int>(), saved);
+}
+
+TEST_F(CliIdentify, ACheckpointOfAnotherJobIsRefusedAndMoreGenerationsContinue) {
+    const fs::path jobFile = writeJob(job(1));
+    ASSERT_EQ(run("identify " + jobFile.string() + " --out " + (dir_ / "out").string() +
+                  " --progress none --no-plots --no-fields").exitCode, 0);
+    json other = job(1);
+    other["seed"] = 5;
+    const CommandResult r = run("identify " + writeJob(other, "other.json").string() + " --out " +
+                                (dir_ / "out").string() + " --progress none --no-plots --no-fields");
+    EXPECT_EQ(r.exitCode, 2);
+    EXPECT_NE(r.err.find("checkpoint of a different job"), std::string::npos) << r.err;
+    // The same job with a higher max_generations continues the finished run.
+    const CommandResult more = run("identify " + writeJob(job(2), "more.json").string() + " --out " +
+                                   (dir_ / "out").string() + " --progress none --no-plots --no-fields");
+    EXPECT_EQ(more.exitCode, 0) << more.err;
+    const json result = json::parse(slurp(dir_ / "out" / "result.json"));
+    EXPECT_EQ(result.at("generations").get<int>(), 2);
+    EXPECT_EQ(result.at("resumed_from_generation").get<int>(), 1);
+}
+
+}  // namespace
