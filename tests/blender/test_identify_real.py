@@ -1,0 +1,199 @@
+"""Identify end to end through the real engine: the add-on's operator, its progress, Cancel
+(SIGTERM → exit 3, checkpoint kept), Resume, and the result loaded into the Results section.
+
+The reference avoids the inverse crime: the same Blender scene is simulated by the engine at another
+resolution, particle seed and viscosity than the identification uses, and the engine's own exact
+silhouettes (`score` against an empty reference, whose difference image is then the silhouette)
+become the masks, written where the add-on's Silhouettes step puts them (WORK/silhouettes)."""
+
+import json
+import math
+import os
+import struct
+import subprocess
+import time
+import zlib
+
+import bpy
+import pytest
+
+from viscoscope import engine, scene_export
+from viscoscope.operators import container, runner
+from viscoscope.operators.identify import identify_dir
+
+WIDTH, HEIGHT = 96, 64   # camera image (and reference masks), pixels
+FPS = 10
+FRAMES = (1, 2, 3)       # reference frames = simulation frames (Blender frame_start is time 0)
+ETA_TRUE = 1.5           # Pa·s, the reference's viscosity
+
+
+def _write_gray_png(path, rows):
+    """An 8-bit greyscale PNG from rows of 0..255 values (top row first)."""
+    raw = b"".join(b"\x00" + bytes(row) for row in rows)
+
+    def chunk(tag, data):
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xffffffff)
+    with open(path, "wb") as fh:
+        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", len(rows[0]), len(rows), 8, 0, 0, 0, 0))
+                 + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def _write_manifest(folder, masks, source):
+    with open(os.path.join(folder, "manifest.json"), "w", encoding="utf-8") as fh:
+        json.dump({"format": "viscoscope.reference", "version": 1, "source": source, "fps": float(FPS),
+                   "width": WIDTH, "height": HEIGHT, "frames": list(FRAMES),
+                   "times_s": [f / FPS for f in FRAMES], "weights": [1.0] * len(FRAMES), "masks": masks}, fh, indent=1)
+
+
+def _silhouette_rows(diff_png):
+    """Simulated-silhouette mask from `score`'s difference image against an empty reference: false
+    positives (orange, R = 255) are the silhouette, agreement outside (grey 40) is background."""
+    img = bpy.data.images.load(diff_png)
+    try:
+        img.colorspace_settings.name = 'Non-Color'
+        w, h = img.size
+        px = img.pixels[:]
+        rows = [[255 if px[4 * (y * w + x)] > 0.5 else 0 for x in range(w)] for y in range(h)]
+    finally:
+        bpy.data.images.remove(img)
+    return rows[::-1]  # Blender's pixels start at the bottom row
+
+
+def _make_reference(ctx, engine_path, work):
+    """Simulate the scene at 16³, seed 7, η = ETA_TRUE and write its silhouettes as WORK/silhouettes."""
+    vs = ctx.scene.viscoscope
+    saved = (vs.sim_resolution, vs.sim_seed, vs.sim_frames, vs.fluid.viscosity)
+    vs.sim_resolution, vs.sim_seed, vs.sim_frames, vs.fluid.viscosity = 16, 7, FRAMES[-1], ETA_TRUE
+    ref = os.path.join(work, "reference_sim")
+    scene_export.export_scene(ctx.scene, os.path.join(ref, "scene.json"))
+    scene_export.export_camera(ctx.scene.camera, ctx.scene, os.path.join(ref, "camera.json"))
+    vs.sim_resolution, vs.sim_seed, vs.sim_frames, vs.fluid.viscosity = saved
+    run = lambda *args: subprocess.run([engine_path, *args], capture_output=True, text=True, timeout=60)  # noqa: E731
+    proc = run("simulate", os.path.join(ref, "scene.json"), "--out", os.path.join(ref, "sim"), "--progress", "none")
+    assert proc.returncode == 0, proc.stderr
+    # The engine's exact silhouettes of those frames: score them against an all-empty reference.
+    empty = os.path.join(ref, "empty")
+    os.makedirs(os.path.join(empty, "masks"))
+    names = ["masks/mask_%05d.png" % f for f in FRAMES]
+    for name in names:
+        _write_gray_png(os.path.join(empty, name), [[0] * WIDTH for _ in range(HEIGHT)])
+    _write_manifest(empty, names, "empty")
+    proc = run("score", "--camera", os.path.join(ref, "camera.json"), "--reference", empty,
+               "--sim", os.path.join(ref, "sim"), "--sim-first", str(FRAMES[0]), "--out", os.path.join(ref, "score"),
+               "--progress", "none")
+    assert proc.returncode == 0, proc.stderr
+    silhouettes = os.path.join(work, "silhouettes")
+    os.makedirs(os.path.join(silhouettes, "masks"))
+    areas = []
+    for frame, name in zip(FRAMES, names):
+        rows = _silhouette_rows(os.path.join(ref, "score", "diff_%05d.png" % frame))
+        areas.append(sum(v > 0 for row in rows for v in row))
+        _write_gray_png(os.path.join(silhouettes, name), rows)
+    _write_manifest(silhouettes, names, "synthetic: engine simulate 16^3 seed 7 + exact silhouettes")
+    # The liquid is seen, and it moves (the column slumps, so its silhouette changes).
+    assert all(30 < a < WIDTH * HEIGHT // 2 for a in areas), areas
+    return silhouettes, areas
+
+
+def _capture_scene(ctx):
+    """Cup (Add Cup), a liquid column on the ground beside it, and a side camera."""
+    container.add_cup(ctx, (0, 0, 0))
+    vs = ctx.scene.viscoscope
+    vs.fill_volume = 0.0  # the liquid is the column below, not the cup's fill
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.075, 0.0, 0.03))
+    liquid = ctx.active_object
+    liquid.scale = (0.05, 0.05, 0.06)
+    liquid.name = "Liquid column"
+    liquid.viscoscope.role = 'LIQUID'
+    bpy.ops.object.camera_add(location=(0.0, -0.45, 0.08), rotation=(math.radians(85), 0, 0))
+    cam = ctx.active_object
+    ctx.scene.camera = cam
+    vs.camera = cam
+    r = ctx.scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = WIDTH, HEIGHT, 100
+    r.fps, r.fps_base = FPS, 1.0
+    ctx.scene.frame_start, ctx.scene.frame_end = 1, FRAMES[-1] + 1
+    vs.fluid.density = 1400.0
+    ctx.view_layer.update()
+
+
+@pytest.mark.engine
+def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_path, use_engine, monkeypatch, request):
+    t0 = time.monotonic()
+    out_dir = os.path.join(identify_dir(ctx.scene), "out")
+
+    def forget_plots():  # later tests look plots up by name ("convergence.png")
+        for img in [i for i in bpy.data.images if bpy.path.abspath(i.filepath).startswith(out_dir)]:
+            bpy.data.images.remove(img)
+    request.addfinalizer(forget_plots)
+    use_engine(engine_path)
+    monkeypatch.setattr(bpy.context.preferences.addons["viscoscope"].preferences, "threads", 2)
+    _capture_scene(ctx)
+    vs = ctx.scene.viscoscope
+    work = str(tmp_work)
+    silhouettes, areas = _make_reference(ctx, engine_path, work)
+    # The job needs a video on disk; with WORK/silhouettes present the engine uses those masks instead.
+    video = os.path.join(work, "pour.mp4")
+    open(video, "wb").close()
+    vs.video_path = video
+    vs.identify_resolution = 12
+    vs.max_generations = 3
+    vs.eta_initial, vs.eta_spread = 4.0, 2.0
+    vs.sim_seed = 1
+
+    # Watch every poll the operator makes (the same pump its modal timer calls): record what the
+    # scene's progress properties show, and press Cancel once a progress update has arrived.
+    st = vs.identify_job
+    seen = []
+    jobs = []
+    real_pump = runner.pump
+
+    def pump(context, kind):
+        running = runner.ACTIVE.get(kind)
+        if running is not None and (not jobs or jobs[-1] is not running.job):
+            jobs.append(running.job)
+        result = real_pump(context, kind)
+        seen.append((len(jobs), st.progress, st.status))
+        if len(jobs) == 1 and st.progress > 0 and not jobs[0].cancel_requested:
+            assert bpy.ops.viscoscope.cancel_job(kind='identify') == {'FINISHED'}
+        return result
+    monkeypatch.setattr(runner, "pump", pump)
+
+    t_start = time.monotonic()
+    assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'CANCELLED'}
+    first_run = time.monotonic() - t_start
+    job_doc = json.load(open(os.path.join(identify_dir(ctx.scene), "job.json")))
+    assert job_doc["silhouettes"] == silhouettes and job_doc["resolution"] == 12 and job_doc["max_generations"] == 3
+    progress_1 = [(p, s) for n, p, s in seen if n == 1 and p > 0]
+    assert progress_1, seen
+    assert progress_1[0][1].startswith("Generation 1/3") and "best η" in progress_1[0][1], progress_1
+    assert jobs[0].returncode == engine.EXIT_CANCELLED, jobs[0].stderr
+    assert st.can_resume and st.status == "Cancelled; Resume continues" and not st.running
+    assert st.out_dir == out_dir
+    checkpoint = json.load(open(os.path.join(out_dir, "checkpoint.json")))
+    done = checkpoint["cma"]["generation"]
+    assert 1 <= done < 3, checkpoint["cma"]
+    assert not os.path.exists(os.path.join(out_dir, "result.json"))
+    assert vs.result_eta == 0.0
+
+    t_resume = time.monotonic()
+    assert bpy.ops.viscoscope.identify_resume('EXEC_DEFAULT') == {'FINISHED'}
+    resume_run = time.monotonic() - t_resume
+    assert len(jobs) == 2 and jobs[1].returncode == engine.EXIT_OK, jobs[1].stderr
+    statuses_2 = [s for n, p, s in seen if n == 2 and s.startswith("Generation ")]
+    assert statuses_2, seen
+    # Resumed: the first generation it reports comes after the checkpointed ones.
+    assert int(statuses_2[0].split()[1].split("/")[0]) == done + 1, statuses_2
+    result = json.load(open(os.path.join(out_dir, "result.json")))
+    eta, (low, high) = result["viscosity"]["value"], result["viscosity"]["interval"]
+    assert st.status == "Done" and st.progress == pytest.approx(100.0) and not st.can_resume and not st.error
+    assert vs.result_eta == pytest.approx(eta, rel=1e-6) and 1e-3 <= eta <= 1e4
+    assert (vs.result_eta_low, vs.result_eta_high) == (pytest.approx(low, rel=1e-6), pytest.approx(high, rel=1e-6))
+    assert vs.result_eta_low <= vs.result_eta <= vs.result_eta_high
+    assert vs.fluid.viscosity == pytest.approx(eta, rel=1e-6)
+    for plot in ("convergence.png", "landscape.png"):  # drawn when the engine finds matplotlib
+        if os.path.isfile(os.path.join(out_dir, plot)):
+            assert any(bpy.path.abspath(i.filepath) == os.path.join(out_dir, plot) for i in bpy.data.images), plot
+    print("\n[identify_real] areas %s; first run %.1f s (cancelled after %d generation(s)), resume %.1f s, "
+          "η = %.4g [%.4g, %.4g] (truth %.3g), total %.1f s"
+          % (areas, first_run, done, resume_run, eta, low, high, ETA_TRUE, time.monotonic() - t0))
