@@ -5,6 +5,7 @@
 #pragma once
 
 #include "camera/camera.h"
+#include "sim/sim.h"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
@@ -151,14 +152,9 @@ double drainedVolume(const std::vector<Eigen::Vector3d>& particles, double parti
 cv::Mat1b rasterizeMesh(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles,
                         const PinholeCamera& camera);
 
-struct TriangleMesh {
-    std::vector<Eigen::Vector3d> vertices;  // world, metres
-    std::vector<Eigen::Vector3i> triangles;
-};
 // The zero level set (negative inside) as triangles, via openvdb::tools::volumeToMesh.
+// (TriangleMesh and loadMesh, for OBJ/PLY files, come from sim/sim.h.)
 TriangleMesh meshFromLevelSet(const openvdb::FloatGrid& levelSet);
-// OBJ or PLY (ASCII or binary little-endian); polygons are fan-triangulated. Throws InputError.
-TriangleMesh loadMesh(const std::filesystem::path& file);
 
 cv::Mat1b silhouetteFromLevelSet(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
 // The fast approximate path: splats each particle as its projected disc, then closes the mask

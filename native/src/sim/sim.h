@@ -11,9 +11,21 @@
 #include <Eigen/Core>
 #include <openvdb/openvdb.h>
 
+#include <filesystem>
 #include <memory>
 #include <random>
 #include <vector>
+
+namespace viscoscope {
+
+struct TriangleMesh {
+    std::vector<Eigen::Vector3d> vertices;  // world, metres
+    std::vector<Eigen::Vector3i> triangles;
+};
+// OBJ or PLY (ASCII or binary little-endian); polygons are fan-triangulated. Throws InputError.
+TriangleMesh loadMesh(const std::filesystem::path& file);
+
+}  // namespace viscoscope
 
 namespace viscoscope::sim {
 

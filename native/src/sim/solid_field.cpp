@@ -1,11 +1,11 @@
 #include "sim/solid_field.h"
 
+#include "sim/sim.h"
+
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/MeshToVolume.h>
 
 #include <algorithm>
-#include <fstream>
-#include <sstream>
 
 namespace viscoscope::sim {
 
@@ -49,76 +49,15 @@ struct PrimitiveDistance {
 
 }  // namespace
 
-void readTriangleMesh(const std::filesystem::path& path, std::vector<openvdb::Vec3s>& points,
-                      std::vector<openvdb::Vec3I>& triangles) {
-    std::ifstream in(path);
-    if (!in) throw InputError(path.string() + ": cannot open mesh file");
-    const std::string ext = path.extension().string();
-    auto fail = [&](const std::string& why) { throw InputError(path.string() + ": " + why); };
-    auto addPolygon = [&](const std::vector<unsigned>& poly) {
-        if (poly.size() < 3) fail("face with fewer than 3 vertices");
-        for (unsigned v : poly)
-            if (v >= points.size()) fail("face refers to a missing vertex");
-        for (size_t k = 1; k + 1 < poly.size(); ++k)  // fan triangulation of convex polygons
-            triangles.emplace_back(poly[0], poly[k], poly[k + 1]);
-    };
-    std::string line;
-    if (ext == ".obj" || ext == ".OBJ") {
-        while (std::getline(in, line)) {
-            std::istringstream s(line);
-            std::string tag;
-            s >> tag;
-            if (tag == "v") {
-                float a, b, c;
-                if (!(s >> a >> b >> c)) fail("malformed vertex line: " + line.substr(0, 60));
-                points.emplace_back(a, b, c);
-            } else if (tag == "f") {
-                std::vector<unsigned> poly;
-                std::string corner;
-                while (s >> corner) {
-                    const long idx = std::strtol(corner.c_str(), nullptr, 10);
-                    poly.push_back(idx > 0 ? static_cast<unsigned>(idx - 1)
-                                           : static_cast<unsigned>(long(points.size()) + idx));
-                }
-                addPolygon(poly);
-            }
-        }
-    } else {  // ASCII PLY with vertex x y z first and faces as "n i0 i1 ..."
-        std::getline(in, line);
-        if (line.rfind("ply", 0) != 0) fail("not a PLY file");
-        size_t vertexCount = 0, faceCount = 0;
-        while (std::getline(in, line) && line.rfind("end_header", 0) != 0) {
-            std::istringstream s(line);
-            std::string word, kind;
-            s >> word;
-            if (word == "format" && (s >> kind) && kind != "ascii") fail("only ASCII PLY is supported");
-            if (word == "element" && (s >> kind)) (kind == "vertex" ? s >> vertexCount : s >> faceCount);
-        }
-        for (size_t i = 0; i < vertexCount && std::getline(in, line); ++i) {
-            std::istringstream s(line);
-            float a, b, c;
-            if (!(s >> a >> b >> c)) fail("malformed vertex line");
-            points.emplace_back(a, b, c);
-        }
-        for (size_t i = 0; i < faceCount && std::getline(in, line); ++i) {
-            std::istringstream s(line);
-            size_t n;
-            s >> n;
-            std::vector<unsigned> poly(n);
-            for (auto& v : poly) s >> v;
-            addPolygon(poly);
-        }
-    }
-    if (triangles.empty()) fail("no triangles");
-}
-
 SolidField::SolidField(const std::vector<Solid>& solids, const Grid& grid) : grid_(grid) {
     openvdb::initialize();
     for (const Solid& solid : solids) {
         if (const auto* mesh = std::get_if<MeshSolid>(&solid)) {
+            const TriangleMesh loaded = loadMesh(mesh->path);
             std::vector<openvdb::Vec3s> points;
             std::vector<openvdb::Vec3I> triangles;
-            readTriangleMesh(mesh->path, points, triangles);
+            for (const Eigen::Vector3d& v : loaded.vertices) points.emplace_back(v.x(), v.y(), v.z());
+            for (const Eigen::Vector3i& t : loaded.triangles) triangles.emplace_back(t[0], t[1], t[2]);
             // Half the simulation cell resolves the solid finely enough for the fraction sampling.
             auto transform = openvdb::math::Transform::createLinearTransform(grid.dx * 0.5);
             std::vector<openvdb::Vec4I> quads;

@@ -29,8 +29,4 @@ private:
     Grid grid_;
 };
 
-// Reads an OBJ or PLY (ASCII) triangle mesh; throws InputError on unreadable files.
-void readTriangleMesh(const std::filesystem::path& path, std::vector<openvdb::Vec3s>& points,
-                      std::vector<openvdb::Vec3I>& triangles);
-
 }  // namespace viscoscope::sim

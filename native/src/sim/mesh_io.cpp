@@ -1,7 +1,5 @@
-// Triangle meshes from OBJ and PLY files, for scoring surfaces that were meshed elsewhere.
-#include "observe/observe.h"
-
-#include "scene/scene.h"
+// Triangle meshes from OBJ and PLY files: mesh solids in scenes, and surfaces meshed elsewhere.
+#include "sim/sim.h"
 
 #include <cstdint>
 #include <cstring>
