@@ -58,8 +58,9 @@ struct FrameStats {
 // A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
 // openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian LevelSetFilter passes. Voxel centres
 // sit at `origin` + (i + ½) voxelSize, so with voxelSize = Δx they coincide with the cell centres.
+// `halfWidth` is the narrow band's half-width in voxels.
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
-                                         const Vec3& origin, int smoothingPasses);
+                                         const Vec3& origin, int smoothingPasses, double halfWidth = 3.0);
 
 class Simulation {
 public:
@@ -112,6 +113,7 @@ private:
     std::array<Field, 3> edgeViscosity_;
     std::vector<double> fineSolidFraction_;  // non-solid fraction of each half-cell, fixed in time
     std::vector<double> cellSolidDistance_;  // solid signed distance at cell centres
+    Vec3i activeLo_{0, 0, 0}, activeHi_{0, 0, 0};  // cells that can hold liquid this step (inclusive)
     double time_ = 0;
     int frame_ = 0;
     double particleVolume_ = 0;

@@ -28,6 +28,8 @@ constexpr double kSolidMargin = 0.05;
 // The level set surface tension takes its curvature from: sphere radius (cells) and Gaussian passes.
 constexpr double kSurfaceParticleRadius = 0.75;
 constexpr int kCurvatureSmoothing = 2;
+// Narrow-band half-width (voxels) of that level set: what its curvature stencil and smoothing need.
+constexpr double kCurvatureBandWidth = 2.0;
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) {
@@ -132,9 +134,9 @@ private:
 }  // namespace
 
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
-                                         const Vec3& origin, int smoothingPasses) {
+                                         const Vec3& origin, int smoothingPasses, double halfWidth) {
     openvdb::initialize();
-    auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, 3.0);
+    auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxelSize, halfWidth);
     auto transform = openvdb::math::Transform::createLinearTransform(voxelSize);
     const Vec3 offset = origin + Vec3::Constant(0.5 * voxelSize);
     transform->postTranslate(openvdb::Vec3d(offset.x(), offset.y(), offset.z()));
@@ -282,6 +284,8 @@ void Simulation::computeFractions() {
         lo[a] = all ? 0 : std::max(lo[a] - margin, 0);
         hi[a] = all ? cells.size[a] - 1 : std::min(hi[a] + margin, cells.size[a] - 1);
     }
+    activeLo_ = lo;
+    activeHi_ = hi;
 
     // Liquid × non-solid fraction of every half-cell in that box.
     const Vec3i fine = 2 * grid_.cells;
@@ -333,27 +337,31 @@ void Simulation::extrapolateVelocity(int layers) {
     for (int a = 0; a < 3; ++a) {
         Field& u = state_.velocity[a];
         std::vector<char>& valid = validFace_[a];
+        // Only faces near the liquid are ever read (by particles and the solve): stay in its box.
+        const Vec3i lo = (activeLo_ - Vec3i::Constant(layers)).cwiseMax(0);
+        const Vec3i hi = (activeHi_ + Vec3i::Constant(layers + 1)).cwiseMin(u.lattice.size - Vec3i::Ones());
+        std::vector<std::pair<int, double>> filled;
         for (int layer = 0; layer < layers; ++layer) {
-            std::vector<char> next = valid;
-            std::vector<double> values = u.values;
-            for (int f = 0; f < u.lattice.count(); ++f) {
-                if (valid[f] || fractions_.solidFace[a][f]) continue;
-                const Vec3i c = u.lattice.coords(f);
-                double sum = 0;
-                int count = 0;
-                for (int b = 0; b < 3; ++b)
-                    for (int d : {-1, 1})
-                        if (const int nb = u.lattice.neighbour(c, b, d); nb >= 0 && valid[nb]) {
-                            sum += u[nb];
-                            ++count;
-                        }
-                if (count) {
-                    values[f] = sum / count;
-                    next[f] = 1;
-                }
+            filled.clear();
+            for (int k = lo[2]; k <= hi[2]; ++k)
+                for (int j = lo[1]; j <= hi[1]; ++j)
+                    for (int i = lo[0]; i <= hi[0]; ++i) {
+                        const int f = u.lattice.index(i, j, k);
+                        if (valid[f] || fractions_.solidFace[a][f]) continue;
+                        double sum = 0;
+                        int count = 0;
+                        for (int b = 0; b < 3; ++b)
+                            for (int d : {-1, 1})
+                                if (const int nb = u.lattice.neighbour(Vec3i(i, j, k), b, d); nb >= 0 && valid[nb]) {
+                                    sum += u[nb];
+                                    ++count;
+                                }
+                        if (count) filled.emplace_back(f, sum / count);
+                    }
+            for (const auto& [f, value] : filled) {
+                u[f] = value;
+                valid[f] = 1;
             }
-            u.values = std::move(values);
-            valid = std::move(next);
         }
     }
 }
@@ -375,7 +383,8 @@ void Simulation::applySurfaceTension(double dt) {
     // Curvature differentiates twice, so it is taken on OpenVDB's smoothed particle level set
     // (cell-aligned voxels); the kernel-averaged distance used for the fractions gave parasitic
     // currents two to three times larger in the hydrostatic test.
-    auto levelSet = particleLevelSet(particles_.position, kSurfaceParticleRadius * dx, dx, grid_.origin, kCurvatureSmoothing);
+    auto levelSet = particleLevelSet(particles_.position, kSurfaceParticleRadius * dx, dx, grid_.origin,
+                                     kCurvatureSmoothing, kCurvatureBandWidth);
     const auto curvature = openvdb::tools::meanCurvature(*levelSet);
     const auto curvatureAccess = curvature->getConstAccessor();
     Field pressureOutside(cells);
