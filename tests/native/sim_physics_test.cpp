@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <string>
 
 using namespace viscoscope;
@@ -70,34 +71,73 @@ TEST(Physics, HydrostaticRestWithAndWithoutSurfaceTension) {
     }
 }
 
-// 2. A film of thickness h on an incline at angle θ, periodic along the slope, no-slip on the bed
-// and traction-free on top: u(z) = (ρ g sinθ / η)(h z − z²/2) (Nusselt). Error shrinks with Δx.
+// 2. A film of thickness h on an incline at angle θ, periodic along the slope, traction-free on
+// top, after 0.3 s ≫ its viscous time. Returns the relative L2 error of the velocity along the
+// slope against `exact(z)`, sampled one per cell through the film.
+namespace {
+const double kFilmDepth = 0.01, kFilmDrive = 1000 * 9.81 * std::sin(10 * M_PI / 180);  // ρ g sinθ
+
+double filmProfileError(const json& material, int resolution, const std::function<double(double)>& exact,
+                        const char* label) {
+    const double h = kFilmDepth, theta = 10 * M_PI / 180, g = 9.81;
+    json doc = baseScene(1.0, resolution);
+    doc["domain"] = {{"min", {0, 0, 0}}, {"max", {0.005, 0.005, 0.02}}, {"resolution", resolution},
+                     {"periodic", {true, true, false}}};
+    doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {0.005, 0.005, h}}});
+    doc["material"] = material;
+    doc["gravity"] = {g * std::sin(theta), 0, -g * std::cos(theta)};
+    doc["fps"] = 10;
+    sim::Simulation s(parseScene(doc, "film"));
+    for (int f = 0; f < 3; ++f) s.advanceFrame();
+    double errorSq = 0, normSq = 0;
+    const double dx = s.grid().dx;
+    for (double z = 0.5 * dx; z < h - dx; z += dx) {
+        const double u = s.velocityAt(Vec3(0.0025, 0.0025, z)).x();
+        errorSq += (u - exact(z)) * (u - exact(z));
+        normSq += exact(z) * exact(z);
+    }
+    const double error = std::sqrt(errorSq / normSq);
+    std::printf("film (%s), %d cells/h: relative L2 velocity error %.4f\n", label, int(std::lround(h / dx)), error);
+    return error;
+}
+}  // namespace
+
+// Newtonian, no-slip bed: u(z) = (ρ g sinθ / η)(h z − z²/2) (Nusselt). The error shrinks with Δx.
 TEST(Physics, NusseltFilmProfileConverges) {
-    const double h = 0.01, theta = 10 * M_PI / 180, rho = 1000, eta = 1.0, g = 9.81;
+    const double eta = 1.0, h = kFilmDepth;
+    const json material = {{"density", 1000}, {"viscosity", eta}};
     double previous = 1e30;
     for (int resolution : {16, 32}) {
-        json doc = baseScene(eta, resolution);
-        doc["domain"] = {{"min", {0, 0, 0}}, {"max", {0.005, 0.005, 0.02}}, {"resolution", resolution},
-                         {"periodic", {true, true, false}}};
-        doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {0.005, 0.005, h}}});
-        doc["gravity"] = {g * std::sin(theta), 0, -g * std::cos(theta)};
-        doc["fps"] = 10;
-        sim::Simulation s(parseScene(doc, "film"));
-        for (int f = 0; f < 3; ++f) s.advanceFrame();  // 0.3 s ≫ the 0.04 s viscous time ρh²/(2.5η)
-        double errorSq = 0, normSq = 0;
-        const double dx = s.grid().dx;
-        for (double z = 0.5 * dx; z < h - dx; z += dx) {
-            const double exact = rho * g * std::sin(theta) / eta * (h * z - 0.5 * z * z);
-            const double u = s.velocityAt(Vec3(0.0025, 0.0025, z)).x();
-            errorSq += (u - exact) * (u - exact);
-            normSq += exact * exact;
-        }
-        const double error = std::sqrt(errorSq / normSq);
-        std::printf("Nusselt film %d cells/h: relative L2 velocity error %.4f\n", int(std::lround(h / dx)), error);
+        const double error =
+            filmProfileError(material, resolution, [&](double z) { return kFilmDrive / eta * (h * z - 0.5 * z * z); },
+                             "Newtonian");
         EXPECT_LT(error, 0.05);
         EXPECT_LT(error, previous);
         previous = error;
     }
+}
+
+// Shear-thinning power law τ = K γ̇ⁿ (the Picard path): the shear stress is still ρ g sinθ (h − z),
+// so γ̇ = (τ/K)^{1/n} and u(z) = (ρ g sinθ/K)^{1/n} n/(n+1) [h^{(n+1)/n} − (h − z)^{(n+1)/n}].
+TEST(Physics, PowerLawFilmMatchesItsProfile) {
+    const double K = 3.4, n = 0.5, h = kFilmDepth;
+    const json material = {{"density", 1000},
+                           {"viscosity", 1.0},
+                           {"model", {{"type", "power_law"}, {"consistency", K}, {"index", n}}}};
+    const double a = std::pow(kFilmDrive / K, 1 / n) * n / (n + 1), p = (n + 1) / n;
+    const double error = filmProfileError(
+        material, 16, [&](double z) { return a * (std::pow(h, p) - std::pow(h - z, p)); }, "power law n=0.5");
+    EXPECT_LT(error, 0.05);
+}
+
+// Navier slip of length b on the bed: the Nusselt profile plus a slip velocity b·(du/dz)_bed =
+// b ρ g sinθ h / η. b = h/5 makes the slip 40 % of the no-slip surface speed.
+TEST(Physics, NavierSlipFilmMatchesItsProfile) {
+    const double eta = 1.0, h = kFilmDepth, b = 0.2 * h;
+    const json material = {{"density", 1000}, {"viscosity", eta}, {"slip_length", b}};
+    const double error = filmProfileError(
+        material, 16, [&](double z) { return kFilmDrive / eta * (h * z - 0.5 * z * z + b * h); }, "slip b=h/5");
+    EXPECT_LT(error, 0.05);
 }
 
 // 3. A ball in rigid rotation without gravity: rigid motion is in the null space of the viscous
@@ -162,61 +202,80 @@ double percentileRadius(const sim::Particles& p, const Vec3& axisPoint, double f
 }  // namespace
 
 // 4. Huppert (1982): a fixed volume V spreading on the ground under gravity and viscosity has
-// front radius r_N = 0.894 (ρ g V³ t / 3η)^{1/8}. Fit r⁸ = A (t − t₀) (the virtual origin absorbs
-// the initial collapse), then the exponent of r against t − t₀ and the prefactor.
+// front radius r_N = 0.894 (ρ g V³ t / 3η)^{1/8} and height h = H (1 − r²/r_N²)^{1/3}, with
+// H = 4V / (3π r_N²). That is an intermediate asymptotic: a released column takes until r ≫ r₀ to
+// forget its shape, so a fit on the slump measures the transient, not the law. The current
+// therefore starts as the similarity solution at t_i (Stokes flow adjusts its velocity at once)
+// and is fitted against absolute time. The front is read from the particles at a volume fraction
+// (the 95th percentile of radius lies where the film is still ~½H thick, not in the sub-cell tip):
+// for this profile the volume beyond ξ = r/r_N is (1 − ξ²)^{4/3}, so r_95 = r_N √(1 − 0.05^{3/4}).
 TEST(Physics, HuppertViscousGravityCurrent) {
     const bool full = fullVerification();
-    // A tall column, so that the current stays several cells thick while it spreads to twice r0.
-    const double rho = 1400, eta = 50, g = 9.81, r0 = 0.025, h0 = 0.04;
-    const double volume = M_PI * r0 * r0 * h0;
+    const double rho = 1400, eta = 50, g = 9.81, volume = 7.85e-5;
+    const double scale = std::pow(rho * g * std::pow(volume, 3) / (3 * eta), 1.0 / 8);
+    const double tStart = 1.0, tEnd = full ? 16.0 : 6.0;
+    const double rStart = 0.894 * scale * std::pow(tStart, 1.0 / 8);
+    const double hStart = 4 * volume / (3 * M_PI * rStart * rStart);
     json doc = baseScene(eta, full ? 96 : 48);
-    doc["domain"] = {{"min", {-0.07, -0.07, 0}}, {"max", {0.07, 0.07, 0.05}}, {"resolution", full ? 96 : 48}};
+    doc["domain"] = {{"min", {-0.075, -0.075, 0}}, {"max", {0.075, 0.075, 0.03}}, {"resolution", full ? 96 : 48}};
     doc["solids"] = {{{"type", "ground"}, {"height", 0.0}}};
-    // Scenes have no cylindrical liquid source: seed a box, then trim its particles to a cylinder.
-    doc["liquids"].push_back({{"type", "box"}, {"min", {-r0, -r0, 0}}, {"max", {r0, r0, h0}}});
+    // Scenes have no profiled liquid source: seed a box, then trim its particles to the profile.
+    doc["liquids"].push_back({{"type", "box"}, {"min", {-rStart, -rStart, 0}}, {"max", {rStart, rStart, hStart}}});
     doc["material"] = {{"density", rho}, {"viscosity", eta}};
     doc["fps"] = 4;
     Scene scene = parseScene(doc, "huppert");
     sim::Simulation s(scene);
     sim::Particles& p = s.particles();
-    for (size_t i = p.position.size(); i-- > 0;)
-        if (std::hypot(p.position[i].x(), p.position[i].y()) > r0) {
+    for (size_t i = p.position.size(); i-- > 0;) {
+        const double xi2 = (std::pow(p.position[i].x(), 2) + std::pow(p.position[i].y(), 2)) / (rStart * rStart);
+        if (xi2 >= 1 || p.position[i].z() > hStart * std::cbrt(1 - xi2)) {
             p.position.erase(p.position.begin() + i);
             p.velocity.erase(p.velocity.begin() + i);
             p.affine.erase(p.affine.begin() + i);
         }
-    std::vector<double> times, radii;
-    const int frames = full ? 24 : 16;
-    for (int f = 0; f < frames; ++f) {
+    }
+    // r_N from the particles, two ways. The second moment: for the similarity profile ⟨r²⟩ = (3/7) r_N²
+    // over the volume, dominated by the resolved bulk. The 95th percentile: the volume beyond
+    // ξ = r/r_N is (1 − ξ²)^{4/3}, so r_95 = r_N √(1 − 0.05^{3/4}); it reads the thin front, which
+    // a late, thin current resolves with only a cell or two, so it is printed, not asserted.
+    const double frontFraction = std::sqrt(1 - std::pow(0.05, 0.75));
+    std::vector<double> times, momentRadii, frontRadii;
+    while (s.time() + tStart < tEnd - 1e-9) {
         s.advanceFrame();
-        if (s.time() >= 1.0) {
-            times.push_back(s.time());
-            radii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.99));
+        const double t = s.time() + tStart;
+        // Skip the first half second, in which the at-rest start picks up the similarity velocity.
+        if (t < tStart + 0.5) continue;
+        double r2 = 0;
+        for (const Vec3& x : s.particles().position) r2 += x.x() * x.x() + x.y() * x.y();
+        times.push_back(t);
+        momentRadii.push_back(std::sqrt(7.0 / 3.0 * r2 / s.particles().position.size()));
+        frontRadii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.95) / frontFraction);
+    }
+    // Least squares ln r = β ln t + c for the exponent; the prefactor is the mean of r_N / (…)^{1/8} t^{1/8}.
+    auto fit = [&](const std::vector<double>& radii) {
+        const size_t n = times.size();
+        double sx = 0, sl = 0, sxx = 0, sxl = 0, prefactor = 0;
+        for (size_t i = 0; i < n; ++i) {
+            const double x = std::log(times[i]), l = std::log(radii[i]);
+            sx += x, sl += l, sxx += x * x, sxl += x * l;
+            prefactor += radii[i] / (scale * std::pow(times[i], 1.0 / 8)) / n;
         }
-    }
-    // Least squares r⁸ = A t + B, so t₀ = −B/A.
-    const size_t n = times.size();
-    double st = 0, sy = 0, stt = 0, sty = 0;
-    for (size_t i = 0; i < n; ++i) {
-        const double y = std::pow(radii[i], 8);
-        st += times[i], sy += y, stt += times[i] * times[i], sty += times[i] * y;
-    }
-    const double a = (n * sty - st * sy) / (n * stt - st * st), b = (sy - a * st) / n, t0 = -b / a;
-    double sx = 0, sl = 0, sxx = 0, sxl = 0;
-    for (size_t i = 0; i < n; ++i) {
-        const double x = std::log(times[i] - t0), l = std::log(radii[i]);
-        sx += x, sl += l, sxx += x * x, sxl += x * l;
-    }
-    const double exponent = (n * sxl - sx * sl) / (n * sxx - sx * sx);
-    const double prefactor = std::pow(a / (rho * g * std::pow(volume, 3) / (3 * eta)), 1.0 / 8);
-    std::printf("Huppert (%s, %d cells across): r(t_end)=%.4f m, t0=%.2f s, exponent %.4f (theory 0.125, error %.1f%%), "
-                "prefactor %.4f (theory 0.894, error %.1f%%)\n",
-                full ? "full" : "CI", s.grid().cells.x(), radii.back(), t0, exponent, 100 * (exponent / 0.125 - 1),
-                prefactor, 100 * (prefactor / 0.894 - 1));
-    // Goal at full size: exponent within 3 %, prefactor within 5 %. The CI grid leaves the current
-    // only ~3 cells thick, so there it guards against regressions with 15 % / 10 %.
-    EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.15) * 0.125);
-    EXPECT_NEAR(prefactor, 0.894, (full ? 0.05 : 0.10) * 0.894);
+        return std::array<double, 2>{(n * sxl - sx * sl) / (n * sxx - sx * sx), prefactor};
+    };
+    const auto [exponent, prefactor] = fit(momentRadii);
+    const auto [frontExponent, frontPrefactor] = fit(frontRadii);
+    std::printf("Huppert (%s, %d cells across, t %.0f–%.0f s, H from %.1f to %.1f cells): second moment: exponent %.4f "
+                "(theory 0.125, error %.1f%%), prefactor %.4f (theory 0.894, error %.1f%%); 95th percentile: "
+                "exponent %.4f (%.1f%%), prefactor %.4f (%.1f%%)\n",
+                full ? "full" : "CI", s.grid().cells.x(), tStart, tEnd, hStart / s.grid().dx,
+                4 * volume / (3 * M_PI * std::pow(momentRadii.back(), 2)) / s.grid().dx, exponent,
+                100 * (exponent / 0.125 - 1), prefactor, 100 * (prefactor / 0.894 - 1), frontExponent,
+                100 * (frontExponent / 0.125 - 1), frontPrefactor, 100 * (frontPrefactor / 0.894 - 1));
+    // Goal: exponent within 3 %, prefactor within 5 %. The exponent is not met yet (the radius stays
+    // within 1.5 % of theory throughout, but lags early and catches up late, and a 1 % drift in r over
+    // this window is a 4–5 % exponent error); CI guards against regressions with 10 %.
+    EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.10) * 0.125);
+    EXPECT_NEAR(prefactor, 0.894, 0.05 * 0.894);
 }
 
 // 6. Against measured data: the lock-release dam break of corn syrup in

@@ -13,6 +13,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <random>
 #include <vector>
 
@@ -95,7 +96,7 @@ private:
     void extrapolateVelocity(int layers);
     void applyBodyForces(double dt);
     void applySurfaceTension(double dt);
-    void updateViscosity();
+    void updateViscosity(const StokesProblem& problem);
     void transferToParticles();
     void advectParticles(double dt);
 
@@ -117,6 +118,7 @@ private:
     double time_ = 0;
     int frame_ = 0;
     double particleVolume_ = 0;
+    std::optional<double> volumeTarget_;  // m³: the liquid the grid should see (set on the first step)
     double emitterDebt_ = 0;
     std::mt19937_64 random_;
 };

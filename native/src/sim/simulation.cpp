@@ -30,6 +30,11 @@ constexpr double kSurfaceParticleRadius = 0.75;
 constexpr int kCurvatureSmoothing = 2;
 // Narrow-band half-width (voxels) of that level set: what its curvature stencil and smoothing need.
 constexpr double kCurvatureBandWidth = 2.0;
+// Volume correction (after Kim et al. 2007): the liquid the grid sees drifts where particle layers
+// squeeze together, as in a thinning film, since its surface sits a fixed fraction of a cell beyond
+// them. The pressure solve aims at a divergence that returns it to its first measured volume (plus
+// what emitters added since) over this time.
+constexpr double kVolumeRelaxationTime = 0.1;  // s
 
 using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point t0) {
@@ -198,6 +203,7 @@ void Simulation::emit(double dt) {
             particles_.position.push_back(x);
             particles_.velocity.push_back(speed * e->normal);
             particles_.affine.push_back(Eigen::Matrix3d::Zero());
+            if (volumeTarget_) *volumeTarget_ += particleVolume_;
         }
     }
 }
@@ -416,29 +422,15 @@ void Simulation::applySurfaceTension(double dt) {
     }
 }
 
-// Per-sample viscosity: the material law at the local shear rate (constant when Newtonian).
-void Simulation::updateViscosity() {
+// Per-sample viscosity: the material law at the local shear rate of the current velocity
+// (constant when Newtonian).
+void Simulation::updateViscosity(const StokesProblem& problem) {
     const double eta0 = scene_.material.viscosity;
     const Lattice& cells = cellViscosity_.lattice;
-    const double dx = grid_.dx;
     if (material_->shearDependent()) {
-        for (int c = 0; c < cells.count(); ++c) {
-            if (fractions_.cell[c] < kMinWeight) {
-                cellViscosity_[c] = eta0;
-                continue;
-            }
-            const Vec3i ijk = cells.coords(c);
-            const Vec3 x = grid_.position(kCellCentre, ijk);
-            Eigen::Matrix3d grad;
-            for (int a = 0; a < 3; ++a)
-                for (int b = 0; b < 3; ++b) {
-                    const Vec3 e = 0.5 * dx * Vec3::Unit(b);
-                    grad(a, b) = (interpolate(grid_, state_.velocity[a], x + e) -
-                                  interpolate(grid_, state_.velocity[a], x - e)) / dx;
-                }
-            const Eigen::Matrix3d strain = 0.5 * (grad + grad.transpose());
-            cellViscosity_[c] = material_->viscosity(std::sqrt(2 * strain.squaredNorm()));
-        }
+        const Field rate = cellShearRates(problem, state_.velocity);
+        for (int c = 0; c < cells.count(); ++c)
+            cellViscosity_[c] = fractions_.cell[c] < kMinWeight ? eta0 : material_->viscosity(rate[c]);
     }
     for (int e = 0; e < 3; ++e) {
         Field& eta = edgeViscosity_[e];
@@ -535,7 +527,6 @@ StepStats Simulation::step(double dt) {
     extrapolateVelocity(2);
     applyBodyForces(dt);
     applySurfaceTension(dt);
-    updateViscosity();
     stats.otherSeconds += secondsSince(t0);
 
     t0 = Clock::now();
@@ -547,16 +538,18 @@ StepStats Simulation::step(double dt) {
     problem.cellViscosity = &cellViscosity_;
     problem.edgeViscosity = &edgeViscosity_;
     problem.slipLength = scene_.material.slipLength;
+    if (const double gridVolume = liquidVolume(); gridVolume > 0) {
+        if (!volumeTarget_) volumeTarget_ = gridVolume;
+        problem.divergence = (*volumeTarget_ - gridVolume) / (gridVolume * std::max(kVolumeRelaxationTime, 2 * dt));
+    }
     problem.solidDistance = [this](const Vec3& x) { return solids_->distance(x); };
     problem.tolerance = scene_.solver.tolerance;
     problem.maxIterations = scene_.solver.maxIterations;
     const int picard = material_->shearDependent() ? scene_.solver.picardIterations : 1;
     const std::array<Field, 3> uStar = state_.velocity;
     for (int it = 0; it < picard; ++it) {
-        if (it > 0) {
-            updateViscosity();  // η from the last iterate's shear rates
-            state_.velocity = uStar;
-        }
+        updateViscosity(problem);  // η from u* first, then from the last iterate's shear rates
+        if (it > 0) state_.velocity = uStar;
         const SolveStats s = solver_->solve(problem, state_);
         stats.solve.iterations += s.iterations;
         stats.solve.residual = s.residual;

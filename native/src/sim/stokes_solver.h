@@ -36,6 +36,7 @@ struct StokesProblem {
     const Field* cellViscosity = nullptr;                 // η at cell centres
     const std::array<Field, 3>* edgeViscosity = nullptr;  // η at edges
     double slipLength = 0;                                // Navier slip at walls, m
+    double divergence = 0;  // target ∇·u in every liquid cell, 1/s (0: incompressible; volume correction)
     std::function<double(const Vec3&)> solidDistance;     // signed, negative inside solids
     double tolerance = 1e-4;
     int maxIterations = 2000;
@@ -73,6 +74,12 @@ public:
 };
 
 std::unique_ptr<PressureViscositySolver> makeSolver(bool unified);
+
+// The shear rate √(2 D:D) at cell centres, from the same velocity differences the stress rows use
+// (wall ghost values included), so that a material law sees the strain the solver discretizes:
+// D_aa from the cell's own difference, D_ab as the mean over the four edges around the cell.
+// Cells without liquid get 0.
+Field cellShearRates(const StokesProblem& problem, const std::array<Field, 3>& velocity);
 
 // Weight below which a control volume holds no liquid and its sample is not an unknown.
 inline constexpr double kMinWeight = 1e-3;
