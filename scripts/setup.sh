@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 
 engine_packages=(build-essential cmake pkg-config libeigen3-dev libsuitesparse-dev libopenvdb-dev
   libboost-iostreams-dev libopencv-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev
-  libbenchmark-dev ffmpeg)
+  libbenchmark-dev libnlopt-cxx-dev ffmpeg)
 test_packages=(blender python3-pytest python3-numpy python3-matplotlib xvfb xauth libegl-mesa0
   libgl1-mesa-dri)
 

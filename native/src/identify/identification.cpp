@@ -73,23 +73,7 @@ std::string fingerprint(const Job& job) {
     return out.str();
 }
 
-struct LogBounds {
-    Eigen::VectorXd lower, upper;
-};
-
 double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo, x)); }
-
-std::vector<double> thetaOf(const Eigen::VectorXd& x, const LogBounds& b) {
-    std::vector<double> theta(x.size());
-    for (Eigen::Index i = 0; i < x.size(); ++i) theta[i] = std::exp(clipped(x[i], b.lower[i], b.upper[i]));
-    return theta;
-}
-
-double boundPenalty(const Eigen::VectorXd& x, const LogBounds& b) {
-    double p = 0;
-    for (Eigen::Index i = 0; i < x.size(); ++i) p += std::pow(x[i] - clipped(x[i], b.lower[i], b.upper[i]), 2);
-    return p;
-}
 
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
@@ -197,6 +181,34 @@ FieldsSummary writeBestFields(const Job& job, const Observation& obs, const std:
 
 }  // namespace
 
+LogSearchSpace logSearchSpace(const Job& job) {
+    const int n = static_cast<int>(job.parameters.size());
+    LogSearchSpace space{Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(n)};
+    for (int i = 0; i < n; ++i) {
+        const ParameterSpec& p = job.parameters[i];
+        space.lower[i] = std::log(p.lower);
+        space.upper[i] = std::log(p.upper);
+        space.start[i] = std::log(p.initial);
+        const double range = space.upper[i] - space.lower[i];
+        space.spread[i] = std::log1p(p.spread / p.initial);
+        if (range > 0) space.spread[i] = std::min(space.spread[i], range / 3);
+        space.spread[i] = std::max(space.spread[i], 1e-6);
+    }
+    return space;
+}
+
+std::vector<double> thetaOf(const Eigen::VectorXd& x, const LogSearchSpace& space) {
+    std::vector<double> theta(x.size());
+    for (Eigen::Index i = 0; i < x.size(); ++i) theta[i] = std::exp(clipped(x[i], space.lower[i], space.upper[i]));
+    return theta;
+}
+
+double boundPenalty(const Eigen::VectorXd& x, const LogSearchSpace& space) {
+    double p = 0;
+    for (Eigen::Index i = 0; i < x.size(); ++i) p += std::pow(x[i] - clipped(x[i], space.lower[i], space.upper[i]), 2);
+    return p;
+}
+
 IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const IdentifyOptions& options) {
     const auto sessionStart = Clock::now();
     fs::create_directories(outDir);
@@ -204,18 +216,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     prepareReference(job, outDir, options.cancel);
     const Observation obs = loadObservation(job);
     const int n = static_cast<int>(job.parameters.size());
-    LogBounds bounds{Eigen::VectorXd(n), Eigen::VectorXd(n)};
-    Eigen::VectorXd x0(n), spread0(n);
-    for (int i = 0; i < n; ++i) {
-        const ParameterSpec& p = job.parameters[i];
-        bounds.lower[i] = std::log(p.lower);
-        bounds.upper[i] = std::log(p.upper);
-        x0[i] = std::log(p.initial);
-        const double range = bounds.upper[i] - bounds.lower[i];
-        spread0[i] = std::log1p(p.spread / p.initial);
-        if (range > 0) spread0[i] = std::min(spread0[i], range / 3);
-        spread0[i] = std::max(spread0[i], 1e-6);
-    }
+    const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
     const double coarseTolerance = 0.02 + 10 * job.toleranceX;
     const std::string print = fingerprint(job);
@@ -223,7 +224,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
     CmaEsSettings settings;
     settings.populationSize = job.populationSize;
-    CmaEs es(x0, spread0, job.seed, settings);
+    CmaEs es(bounds.start, bounds.spread, job.seed, settings);
     int coarseEnd = plannedCoarseGenerations(job);
     json evaluated = json::array(), generations = json::array();
     double elapsedBefore = 0;

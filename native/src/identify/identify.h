@@ -170,6 +170,21 @@ Evaluation evaluate(const Job& job, const Observation& observation, const std::v
                     int resolution, const std::atomic<bool>* cancel = nullptr);
 
 // ---------------------------------------------------------------------------------------------
+// The search space the optimizer sees (see the top of this file), shared with benchmarks that run
+// other optimizers on the same job.
+
+struct LogSearchSpace {
+    Eigen::VectorXd lower, upper;  // ln min, ln max
+    Eigen::VectorXd start;         // ln θ0
+    Eigen::VectorXd spread;        // ln(1 + spread/θ0), at most a third of the range, at least 1e-6
+};
+LogSearchSpace logSearchSpace(const Job& job);
+// θ = exp(x clipped into the bounds).
+std::vector<double> thetaOf(const Eigen::VectorXd& x, const LogSearchSpace& space);
+// Σ (x − clip(x))², the squared distance outside the bounds, which CMA-ES adds to E.
+double boundPenalty(const Eigen::VectorXd& x, const LogSearchSpace& space);
+
+// ---------------------------------------------------------------------------------------------
 // The loop.
 
 struct GenerationReport {
