@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The full-size physics verification (DESIGN.md "Physics checks"): the same checks CI runs on coarse
-# grids, at the sizes the figures in the issue notes quote. Prints the figures; takes ~10–20 minutes.
+# grids, at the sizes the figures in the issue notes quote. Prints the figures; takes ~30 minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh engine
