@@ -115,6 +115,9 @@ TEST_F(CliSynth, BadInputsExitTwoWithOneLine) {
     json noT = cameraJson();
     noT.erase("t");
     expectBadInput(run(synth(scene, write("no_t.json", noT.dump()))), "no_t.json: t: missing");
+    json odd = cameraJson();
+    odd["width"] = 95;
+    expectBadInput(run(synth(scene, write("odd.json", odd.dump()))), "odd.json: width/height: the mp4 clip needs an even");
     json distorted = cameraJson();
     distorted["distortion"][0] = 0.1;
     expectBadInput(run(synth(scene, write("distorted.json", distorted.dump()))), "distortion");

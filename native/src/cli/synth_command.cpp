@@ -184,6 +184,10 @@ int runSynth(const SynthArguments& args) {
     scene.outputs.vdb = true;
     scene.outputs.mesh = true;
     const PinholeCamera camera = loadCamera(args.camera);
+    // MPEG-4 stores 4:2:0 chroma; FFmpeg would silently crop an odd size to an even one.
+    if (camera.width % 2 || camera.height % 2)
+        throw InputError(args.camera + ": width/height: the mp4 clip needs an even image size, got " +
+                         std::to_string(camera.width) + "x" + std::to_string(camera.height));
     const PinholeCamera big = supersampled(camera, args.supersample);
     const BlenderCameraParams renderCamera = blenderFromCamera(big, args.camera);
     const fs::path blender = findExecutable(args.blender, "--blender");
