@@ -213,6 +213,13 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["format"] = "viscoscope.scene";
         expectBadInput(writeJob(doc, "format.json"), "format");
     }
+    {  // extraction options: a misspelt name, a clean plate that is not there
+        json doc = job();
+        doc["extraction"] = {{"treshold", 100}};
+        expectBadInput(writeJob(doc, "typo.json"), "extraction.treshold: unknown extraction option");
+        doc["extraction"] = {{"clean_plate", "plate.png"}};
+        expectBadInput(writeJob(doc, "plate.json"), "extraction.clean_plate");
+    }
 }
 
 TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {

@@ -183,65 +183,21 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The real requirement: a reference rendered by Blender (Cycles, a plain backdrop, one light) from
-// the reference simulation's meshes (24³, seed 11) at 192×128, downsampled to 96×64 like a phone
-// clip, then extracted like footage (MOG2 against a rendered clean plate). The camera is a
-// "viscoscope.blender_camera" file: Blender uses its numbers directly and the engine converts it
-// with cameraFromBlender, as it does for the add-on's export.
+// The real requirement: a reference made by `viscoscope synth` from the truth scene at 24³ with
+// seed 11: Blender (Cycles, a plain backdrop, one light, the ground) renders it at 192×128, and it
+// is area-downsampled to 96×64 and encoded as an mp4 like a phone clip. identify extracts that clip
+// like footage (MOG2 against the rendered clean plate). The camera is a "viscoscope.blender_camera"
+// file: Blender renders through its inverse conversion, and the engine reads it with
+// cameraFromBlender, as it does for the add-on's export.
 
-const char* kBlenderScript = R"PY(
-import bpy, json, os, sys
-args = sys.argv[sys.argv.index("--") + 1:]
-cam_file, mesh_dir, out_dir = args
-cam = json.load(open(cam_file))
-bpy.ops.wm.read_factory_settings(use_empty=True)
-scene = bpy.context.scene
-scene.render.engine = 'CYCLES'
-scene.cycles.samples = 8
-scene.cycles.use_denoising = False
-scene.cycles.seed = 0
-scene.view_settings.view_transform = 'Standard'
-scene.render.resolution_x = cam["resolution_x"]
-scene.render.resolution_y = cam["resolution_y"]
-scene.render.resolution_percentage = 2 * int(cam["resolution_percentage"])  # render at twice the size
-scene.render.image_settings.file_format = 'PNG'
-scene.render.image_settings.color_mode = 'RGB'
-world = bpy.data.worlds.new("backdrop")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs[0].default_value = (0.75, 0.75, 0.75, 1)
-scene.world = world
-cd = bpy.data.cameras.new("camera")
-cd.lens = cam["lens_mm"]; cd.sensor_width = cam["sensor_width_mm"]; cd.sensor_height = cam["sensor_height_mm"]
-cd.sensor_fit = cam["sensor_fit"]; cd.shift_x = cam["shift_x"]; cd.shift_y = cam["shift_y"]
-co = bpy.data.objects.new("camera", cd)
-from mathutils import Matrix
-co.matrix_world = Matrix(cam["matrix_world"])
-scene.collection.objects.link(co)
-scene.camera = co
-ld = bpy.data.lights.new("sun", 'SUN'); ld.energy = 3.0
-lo = bpy.data.objects.new("sun", ld); lo.rotation_euler = (0.6, 0.2, 0.3)
-scene.collection.objects.link(lo)
-mat = bpy.data.materials.new("honey"); mat.use_nodes = True
-bsdf = mat.node_tree.nodes["Principled BSDF"]
-bsdf.inputs["Base Color"].default_value = (0.12, 0.05, 0.01, 1); bsdf.inputs["Roughness"].default_value = 0.6
-scene.render.filepath = os.path.join(out_dir, "clean_plate.png")
-bpy.ops.render.render(write_still=True)
-for name in sorted(os.listdir(mesh_dir)):
-    verts, faces = [], []
-    for line in open(os.path.join(mesh_dir, name)):
-        p = line.split()
-        if p and p[0] == "v": verts.append(tuple(float(x) for x in p[1:4]))
-        elif p and p[0] == "f": faces.append(tuple(int(x.split("/")[0]) - 1 for x in p[1:]))
-    me = bpy.data.meshes.new(name); me.from_pydata(verts, [], faces); me.materials.append(mat)
-    ob = bpy.data.objects.new(name, me); scene.collection.objects.link(ob)
-    scene.render.filepath = os.path.join(out_dir, name.replace(".obj", ".png"))
-    bpy.ops.render.render(write_still=True)
-    bpy.data.objects.remove(ob)
-)PY";
+std::string slurp(const fs::path& file) {
+    std::ifstream stream(file);
+    return {std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+}
 
 json blenderCameraJson() {
     // The side camera of cameraJson(1): 200 px focal length over 96 px = 75 mm on a 36 mm sensor,
-    // the principal point 6 px above the centre. Blender renders it at 200 %.
+    // the principal point 6 px above the centre. synth renders it at twice the size (--supersample 2).
     return {{"format", "viscoscope.blender_camera"}, {"version", 1}, {"lens_mm", 75.0}, {"sensor_width_mm", 36.0},
             {"sensor_height_mm", 24.0}, {"sensor_fit", "HORIZONTAL"}, {"shift_x", 0.0}, {"shift_y", -6.0 / 96.0},
             {"resolution_x", 96}, {"resolution_y", 64}, {"resolution_percentage", 100}, {"pixel_aspect_x", 1.0},
@@ -252,69 +208,40 @@ json blenderCameraJson() {
 TEST_F(IdentifyLoop, RecoversViscosityFromABlenderRenderedReference) {
     if (std::system("blender --version > /dev/null 2>&1") != 0) GTEST_SKIP() << "blender not installed";
     const fs::path work = dir_ / "blender";
-    fs::create_directories(work / "meshes");
-    fs::create_directories(work / "renders");
-    fs::create_directories(work / "frames");
+    fs::create_directories(work);
+    std::ofstream(work / "truth.json") << sceneJson(kEtaTrue, 24, 11, 10).dump(1);
+    std::ofstream(work / "blender_camera.json") << blenderCameraJson().dump(1);
     const auto start = std::chrono::steady_clock::now();
-    {  // the reference simulation's surfaces, frames 0–10
-        const Scene scene = parseScene(sceneJson(kEtaTrue, 24, 11, 10), "reference scene");
-        sim::Simulation simulation(scene);
-        for (int frame = 0; frame <= 10; ++frame) {
-            if (frame > 0) simulation.advanceFrame();
-            std::vector<openvdb::Vec3s> points;
-            std::vector<openvdb::Vec3I> triangles;
-            surface::meshLevelSet(*surface::liquidLevelSet(simulation.particles().position, scene.cellSize()), points,
-                                  triangles);
-            char name[32];
-            std::snprintf(name, sizeof name, "frame_%05d.obj", frame);
-            surface::writeObj(work / "meshes" / name, points, triangles);
-        }
-    }
-    json camera = blenderCameraJson();
-    std::ofstream(work / "blender_camera.json") << camera.dump(1);
-    std::ofstream(work / "render.py") << kBlenderScript;
-    const std::string command = "blender -b --factory-startup --python-exit-code 1 --python " +
-                                (work / "render.py").string() + " -- " + (work / "blender_camera.json").string() + " " +
-                                (work / "meshes").string() + " " + (work / "renders").string() + " > " +
-                                (work / "blender.log").string() + " 2>&1";
-    ASSERT_EQ(std::system(command.c_str()), 0) << "see " << work / "blender.log";
-    const double renderSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    // 192×128 renders → 96×64 "footage".
-    auto shrink = [](const fs::path& from, const fs::path& to) {
-        const cv::Mat big = cv::imread(from.string(), cv::IMREAD_COLOR);
-        ASSERT_FALSE(big.empty()) << from;
-        ASSERT_EQ(big.cols, 192);
-        cv::Mat small;
-        cv::resize(big, small, cv::Size(96, 64), 0, 0, cv::INTER_AREA);
-        cv::imwrite(to.string(), small);
-    };
-    shrink(work / "renders" / "clean_plate.png", work / "clean_plate.png");
-    for (int frame = 0; frame <= 10; ++frame) {
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%05d.png", frame);
-        shrink(work / "renders" / name, work / "frames" / name);
-    }
-    ExtractionOptions extraction;
-    extraction.fps = 30;
-    extraction.cleanPlate = work / "clean_plate.png";
-    extraction.weights = "0:0";  // frame 0 is the same for every θ
-    const ReferenceManifest reference = extractSilhouettes(work / "frames", extraction, work / "reference");
-    ASSERT_EQ(reference.frames.size(), 11u);
-    ASSERT_GT(silhouetteArea(reference.mask(10)), 100);
-
+    const std::string command = std::string(VISCOSCOPE_CLI) + " synth " + (work / "truth.json").string() + " --camera " +
+                                (work / "blender_camera.json").string() + " --out " + (work / "synth").string() +
+                                " --resolution 24 --seed 11 --samples 8 --supersample 2 --progress none > " +
+                                (work / "synth.log").string() + " 2>&1";
+    ASSERT_EQ(std::system(command.c_str()), 0) << slurp(work / "synth.log");
+    const json synth = json::parse(slurp(work / "synth" / "synth.json"));
+    const json& timings = synth.at("timings");
     json doc = jobJson();
     doc["camera"] = "blender/blender_camera.json";
-    doc["silhouettes"] = "blender/reference";
+    doc.erase("silhouettes");
+    doc["video"] = "blender/synth/reference.mp4";
+    doc["extraction"] = {{"clean_plate", "blender/synth/clean_plate.png"},
+                         {"exclude_mask", "blender/synth/exclude.png"},
+                         {"weights", "0:0"}};  // frame 0 is the same for every θ
     identify::IdentifyOptions options;
     options.writeFields = false;
     const identify::IdentificationResult result =
         identify::identify(job(doc), work / "out", options);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double error = std::abs(result.theta[0] - kEtaTrue) / kEtaTrue;
+    const ReferenceManifest reference = loadReferenceManifest(work / "out" / "reference");
+    EXPECT_EQ(reference.frames.size(), 11u);
+    EXPECT_GT(silhouetteArea(reference.mask(10)), 100);
     std::printf("[ identify ] Blender-rendered reference: eta = %.4f Pa·s (truth %.1f, error %.1f %%), interval "
-                "[%.3f, %.3f] (%s), E %.4g, %ld evaluations; render %.1f s, total %.1f s\n",
+                "[%.3f, %.3f] (%s), E %.4g, %ld evaluations; synth %.1f s (simulate %.1f, render %.1f, encode %.1f), "
+                "total %.1f s\n",
                 result.theta[0], kEtaTrue, 100 * error, result.interval[0][0], result.interval[0][1],
-                result.intervalMethod.c_str(), result.E, result.evaluations, renderSeconds, wall);
+                result.intervalMethod.c_str(), result.E, result.evaluations, timings.at("total_s").get<double>(),
+                timings.at("simulate_s").get<double>(), timings.at("render_s").get<double>(),
+                timings.at("encode_s").get<double>(), wall);
     const json& fit = result.document.at("viscosity").at("profile_fit");
     if (fit.contains("x_min"))
         std::printf("[ identify ] Blender-rendered reference: parabola vertex of E(ln eta) at eta = %.4f\n",

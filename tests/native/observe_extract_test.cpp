@@ -171,6 +171,52 @@ TEST(FrameWeights, RangesListsAndErrors) {
     EXPECT_THROW(parseFrameWeights("0-3:1,,", frames), InputError);
 }
 
+TEST(ExtractionOptions, ParsedFromAJobsExtractionObject) {
+    const fs::path dir = fs::temp_directory_path() / ("viscoscope_extraction_options_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    cv::imwrite((dir / "plate.png").string(), cv::Mat3b(4, 4, cv::Vec3b(90, 90, 90)));
+    const nlohmann::json doc{{"first", 2},           {"last", 9},          {"step", 3},
+                             {"fps", 24.0},          {"clean_plate", "plate.png"},
+                             {"exclude_polygons", {{{0, 0}, {3, 0}, {0, 3}}}},
+                             {"weights", "0-2:0"},   {"mog2_variance_threshold", 9.5},
+                             {"mog2_minimum_variance", 20}, {"compensate_gain", false},
+                             {"threshold", 200},     {"close_kernel_px", 7}, {"open_kernel_px", 0}};
+    const ExtractionOptions o = parseExtractionOptions(doc, "job.json: extraction", dir);
+    EXPECT_EQ(o.first, 2);
+    EXPECT_EQ(o.last, 9);
+    EXPECT_EQ(o.step, 3);
+    EXPECT_EQ(o.fps, 24.0);
+    EXPECT_EQ(o.cleanPlate, dir / "plate.png");  // relative to the job's folder
+    EXPECT_FALSE(o.excludeMask);
+    ASSERT_EQ(o.excludePolygons.size(), 1u);
+    EXPECT_EQ(o.excludePolygons[0][1], cv::Point2d(3, 0));
+    EXPECT_EQ(o.weights, "0-2:0");
+    EXPECT_EQ(o.varianceThreshold, 9.5);
+    EXPECT_EQ(o.minimumVariance, 20);
+    EXPECT_FALSE(o.compensateGain);
+    EXPECT_EQ(o.threshold, 200);
+    EXPECT_EQ(o.closeKernel, 7);
+    EXPECT_EQ(o.openKernel, 0);
+    EXPECT_EQ(parseExtractionOptions(nlohmann::json::object(), "x", dir).threshold, ExtractionOptions().threshold);
+
+    const auto fails = [&](const nlohmann::json& bad, const std::string& message) {
+        try {
+            parseExtractionOptions(bad, "job.json: extraction", dir);
+            ADD_FAILURE() << bad.dump() << " was accepted";
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+        }
+    };
+    fails({{"treshold", 100}}, "job.json: extraction.treshold: unknown extraction option");
+    fails({{"clean_plate", "absent.png"}}, "extraction.clean_plate: " + (dir / "absent.png").string() + " not found");
+    fails({{"step", 0}}, "job.json: extraction: --step must be ≥ 1");
+    fails({{"weights", "0-3:x"}}, "job.json: extraction:");
+    fails({{"threshold", "high"}}, "extraction.threshold: must be an integer");
+    fails({{"exclude_polygons", {{1, 2}}}}, "extraction.exclude_polygons");
+    fails(nlohmann::json::array(), "must be an object");
+    fs::remove_all(dir);
+}
+
 TEST(ScalarTracks, FrontAreaCsvAndNormalizedError) {
     cv::Mat1b mask(50, 100, uchar(0));
     cv::rectangle(mask, cv::Rect(10, 15, 50, 10), cv::Scalar(255), cv::FILLED);  // columns 10..59

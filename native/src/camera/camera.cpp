@@ -109,6 +109,34 @@ PinholeCamera cameraFromBlender(const BlenderCameraParams& b) {
     return camera;
 }
 
+BlenderCameraParams blenderFromCamera(const PinholeCamera& camera, const std::string& origin) {
+    validateCamera(camera, origin);
+    if (!camera.distortion.isZero())
+        throw InputError(origin + ": distortion: Blender cameras have no lens distortion; undistort first");
+    if (camera.K(0, 1) != 0) throw InputError(origin + ": K: Blender cannot render a skewed K (K[0][1] != 0)");
+    const double width = camera.width, height = camera.height;
+    const double fx = camera.K(0, 0), fy = camera.K(1, 1), cx = camera.K(0, 2), cy = camera.K(1, 2);
+    BlenderCameraParams b;
+    b.sensorFit = SensorFit::Horizontal;  // the sensor width spans the image width: viewfac = width
+    b.sensorWidthMm = 36;
+    b.sensorHeightMm = 36 * height / width;
+    b.lensMm = fx * b.sensorWidthMm / width;
+    b.resolutionX = camera.width;
+    b.resolutionY = camera.height;
+    b.resolutionPercentage = 100;
+    const double ycor = fx / fy;  // Blender's pixel_aspect_y / pixel_aspect_x
+    b.pixelAspectX = ycor >= 1 ? 1 : 1 / ycor;
+    b.pixelAspectY = ycor >= 1 ? ycor : 1;
+    // cameraFromBlender's principal point solved for the shifts.
+    b.shiftX = (0.5 * width - 0.5 - cx) / width;
+    b.shiftY = (cy + 0.5 - 0.5 * height) * ycor / width;
+    const Eigen::Matrix3d openCvToBlender = Eigen::Vector3d(1, -1, -1).asDiagonal();
+    b.matrixWorld.setIdentity();
+    b.matrixWorld.topLeftCorner<3, 3>() = camera.R.transpose() * openCvToBlender;
+    b.matrixWorld.block<3, 1>(0, 3) = -camera.R.transpose() * camera.t;
+    return b;
+}
+
 // ---------------------------------------------------------------------------------------------
 // JSON
 
@@ -245,6 +273,20 @@ BlenderCameraParams parseBlenderCamera(const nlohmann::json& doc, const std::str
     b.pixelAspectY = in.number("pixel_aspect_y");
     b.matrixWorld = in.matrix("matrix_world", 4, 4);
     return b;
+}
+
+nlohmann::json blenderCameraToJson(const BlenderCameraParams& b) {
+    const char* fit = b.sensorFit == SensorFit::Horizontal ? "HORIZONTAL"
+                      : b.sensorFit == SensorFit::Vertical ? "VERTICAL"
+                                                           : "AUTO";
+    return {{"format", "viscoscope.blender_camera"}, {"version", 1},
+            {"lens_mm", b.lensMm},                   {"sensor_width_mm", b.sensorWidthMm},
+            {"sensor_height_mm", b.sensorHeightMm},  {"sensor_fit", fit},
+            {"shift_x", b.shiftX},                   {"shift_y", b.shiftY},
+            {"resolution_x", b.resolutionX},         {"resolution_y", b.resolutionY},
+            {"resolution_percentage", b.resolutionPercentage},
+            {"pixel_aspect_x", b.pixelAspectX},      {"pixel_aspect_y", b.pixelAspectY},
+            {"matrix_world", rowsOf(b.matrixWorld)}};
 }
 
 PinholeCamera loadCamera(const std::filesystem::path& file) {

@@ -54,12 +54,18 @@ struct BlenderCameraParams {
 // view plane by shift·viewfac. The camera looks down its local −Z with +Y up; scale in
 // matrix_world is ignored, as Blender ignores it for rendering. Throws InputError on bad values.
 PinholeCamera cameraFromBlender(const BlenderCameraParams& params);
+// The inverse, for rendering a camera in Blender: HORIZONTAL fit on a 36 mm sensor, resolution
+// percentage 100, fx ≠ fy as a pixel aspect (Blender keeps both aspects ≥ 1), the principal point as
+// shift. cameraFromBlender(blenderFromCamera(c)) reproduces c's K, R, t and size. Throws InputError
+// (naming `origin`) when Blender cannot represent the camera: lens distortion or a skewed K.
+BlenderCameraParams blenderFromCamera(const PinholeCamera& camera, const std::string& origin);
 
 // Camera JSON. `loadCamera` accepts "viscoscope.camera" and "viscoscope.blender_camera" files and
 // validates every field; errors name the file and the field.
 PinholeCamera parseCamera(const nlohmann::json& doc, const std::string& origin);
 PinholeCamera loadCamera(const std::filesystem::path& file);
 BlenderCameraParams parseBlenderCamera(const nlohmann::json& doc, const std::string& origin);
+nlohmann::json blenderCameraToJson(const BlenderCameraParams& params);  // what parseBlenderCamera reads
 nlohmann::json cameraToJson(const PinholeCamera& camera);
 void saveCamera(const PinholeCamera& camera, const std::filesystem::path& file);
 // Throws InputError("<origin>: <field>: ...") for non-finite values, non-positive sizes or focal

@@ -3,6 +3,7 @@
 // evaluations finish, the checkpoint is written and the command exits 3.
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "cli/scripts.h"
 #include "identify/identify.h"
 
 #include <openvdb/openvdb.h>
@@ -25,25 +26,9 @@ struct IdentifyArguments {
     bool noPlots = false, noFields = false;
 };
 
-// scripts/plot_identification.py next to the executable's source tree, or $VISCOSCOPE_SCRIPTS.
-std::optional<fs::path> findPlotScript() {
-    if (const char* dir = std::getenv("VISCOSCOPE_SCRIPTS")) {
-        const fs::path p = fs::path(dir) / "plot_identification.py";
-        if (fs::exists(p)) return p;
-    }
-    std::error_code ec;
-    fs::path here = fs::read_symlink("/proc/self/exe", ec).parent_path();
-    for (int up = 0; up < 6 && !here.empty(); ++up, here = here.parent_path()) {
-        const fs::path p = here / "scripts" / "plot_identification.py";
-        if (fs::exists(p)) return p;
-        if (here == here.parent_path()) break;
-    }
-    return std::nullopt;
-}
-
 // convergence.png and landscape.png via matplotlib; a missing plotter is a note, not an error.
 std::string makePlots(const fs::path& outDir) {
-    const auto script = findPlotScript();
+    const auto script = findScript("plot_identification.py");
     if (!script) return "skipped: scripts/plot_identification.py not found";
     if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0)
         return "skipped: /usr/bin/python3 with matplotlib not available";

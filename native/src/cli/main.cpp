@@ -27,6 +27,8 @@ int main(int argc, char** argv) {
         cli::addScoreCommand(app),
         cli::addCameraCommand(app),
         cli::addIdentifyCommand(app),
+        cli::addSynthCommand(app),
+        cli::addCompareCommand(app),
     };
 
     try {

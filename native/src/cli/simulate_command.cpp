@@ -1,8 +1,8 @@
 // `viscoscope simulate scene.json --out DIR`: runs the forward model and writes per-frame files
 // (see surface/surface.h). DIR/simulation.json is written last, so its presence marks a complete run.
+#include "cli/simulation_folder.h"
+
 #include "cli/commands.h"
-#include "cli/progress.h"
-#include "scene/scene.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -24,12 +24,6 @@ struct SimulateOptions {
     std::string progress = "text";
 };
 
-std::string frameName(const char* prefix, int frame, const char* ext) {
-    char name[64];
-    std::snprintf(name, sizeof name, "%s_%05d.%s", prefix, frame, ext);
-    return name;
-}
-
 void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& dir) {
     const Scene& scene = simulation.scene();
     const int f = simulation.frame();
@@ -46,15 +40,20 @@ void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& 
     }
 }
 
-int runSimulate(const SimulateOptions& options) {
-    const Scene scene = loadScene(options.scene);
-    const std::filesystem::path dir = options.out;
+}  // namespace
+
+std::string frameName(const char* prefix, int frame, const char* ext) {
+    char name[64];
+    std::snprintf(name, sizeof name, "%s_%05d.%s", prefix, frame, ext);
+    return name;
+}
+
+int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress) {
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) throw InputError(dir.string() + ": cannot create output folder (" + ec.message() + ")");
     std::filesystem::remove(dir / "simulation.json", ec);
 
-    ProgressReporter progress(options.progress);
     const auto start = std::chrono::steady_clock::now();
     sim::Simulation simulation(scene);
     const double initialVolume = simulation.liquidVolume();
@@ -72,12 +71,12 @@ int runSimulate(const SimulateOptions& options) {
             {"converged", stats.converged},
             {"seconds", {{"transfer", stats.transferSeconds}, {"solve", stats.solveSeconds}, {"other", stats.otherSeconds}}}};
         frames.push_back(record);
-        progress.report({{"event", "progress"}, {"frame", stats.frame}, {"frames", scene.frames},
+        progress.report({{"event", "progress"}, {"stage", "simulate"}, {"frame", stats.frame}, {"frames", scene.frames},
                          {"time", stats.simulatedTime}, {"steps", stats.steps},
                          {"iterations", stats.solverIterations}, {"volume", stats.liquidVolume},
                          {"elapsed", elapsed}, {"eta", elapsed / (f + 1) * (scene.frames - f - 1)}});
         if (g_cancelRequested) {
-            progress.report({{"event", "cancelled"}, {"frame", stats.frame}});
+            progress.report({{"event", "cancelled"}, {"stage", "simulate"}, {"frame", stats.frame}});
             return kExitCancelled;
         }
     }
@@ -89,11 +88,10 @@ int runSimulate(const SimulateOptions& options) {
                                     {"wall_seconds", elapsed}};
     std::ofstream(dir / "simulation.json.tmp") << summary.dump(1);
     std::filesystem::rename(dir / "simulation.json.tmp", dir / "simulation.json");
-    progress.report({{"event", "done"}, {"frames", scene.frames}, {"elapsed", elapsed}, {"volume_drift", drift}});
+    progress.report({{"event", "done"}, {"stage", "simulate"}, {"frames", scene.frames}, {"elapsed", elapsed},
+                     {"volume_drift", drift}});
     return kExitOk;
 }
-
-}  // namespace
 
 Command addSimulateCommand(CLI::App& app) {
     auto options = std::make_shared<SimulateOptions>();
@@ -102,7 +100,9 @@ Command addSimulateCommand(CLI::App& app) {
     sub->add_option("--out", options->out, "Output folder")->required();
     sub->add_option("--progress", options->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}));
-    return {sub, [options] { return runSimulate(*options); }};
+    return {sub, [options] {
+                return simulateIntoFolder(loadScene(options->scene), options->out, ProgressReporter(options->progress));
+            }};
 }
 
 }  // namespace viscoscope::cli

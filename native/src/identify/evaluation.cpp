@@ -15,10 +15,7 @@ namespace fs = std::filesystem;
 void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>* cancel) {
     if (!job.referenceDir.empty() || !job.video) return;
     const fs::path dir = outDir / "reference";
-    if (!fs::exists(dir / "manifest.json")) {
-        ExtractionOptions options;
-        extractSilhouettes(*job.video, options, dir, {}, cancel);
-    }
+    if (!fs::exists(dir / "manifest.json")) extractSilhouettes(*job.video, job.extraction, dir, {}, cancel);
     job.referenceDir = dir;
     const ReferenceManifest reference = loadReferenceManifest(dir);
     if (reference.width != job.camera.width || reference.height != job.camera.height)

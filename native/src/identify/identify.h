@@ -114,6 +114,7 @@ struct Job {
     PinholeCamera camera;
     std::filesystem::path referenceDir;          // the `extract` manifest folder
     std::optional<std::filesystem::path> video;  // extracted into OUT/reference when no silhouettes
+    ExtractionOptions extraction;                // how: the job's optional "extraction" object
     std::optional<std::filesystem::path> trackCsv;
     double trackWeight = 1;
     double timeOffset = 0;  // simulation time of reference time 0 (s)
@@ -147,8 +148,8 @@ struct Observation {
     std::optional<ScalarTrack> track;
 };
 
-// When the job names a video but no extracted silhouettes, extracts them into OUT/reference (once;
-// a finished extraction is reused) and points job.referenceDir there.
+// When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
+// job.extraction (once; a finished extraction is reused) and points job.referenceDir there.
 void prepareReference(Job& job, const std::filesystem::path& outDir, const std::atomic<bool>* cancel = nullptr);
 
 // Loads the reference (checking image size against the camera and that frames remain) and maps

@@ -1,5 +1,6 @@
 // The job file ("viscoscope.job", version 1): what addon/operators/identify.py `write_job` writes,
-// plus optional fields for the loop. Validated up front so a bad job fails before any simulation.
+// plus optional fields for the loop and for extracting the video ("extraction"). Validated up front
+// so a bad job fails before any simulation.
 #include "identify/identify.h"
 
 #include <cmath>
@@ -127,6 +128,9 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": video: " + job.video->string() + " not found");
     if (silhouettes && !fs::exists(job.referenceDir / "manifest.json"))
         throw InputError(origin + ": silhouettes: " + (job.referenceDir / "manifest.json").string() + " not found");
+    // How to extract the video (clean plate, exclusion, weights, ...); `extract`'s parameter names.
+    if (doc.contains("extraction") && !doc.at("extraction").is_null())
+        job.extraction = parseExtractionOptions(doc.at("extraction"), origin + ": extraction", baseDir);
 
     if (doc.contains("track") && !doc.at("track").is_null()) {
         const nlohmann::json& track = doc.at("track");

@@ -246,6 +246,38 @@ nlohmann::json parametersJson(const ExtractionOptions& o) {
             {"weights", o.weights}};
 }
 
+// One field of a job's "extraction" object, typed.
+struct OptionReader {
+    const nlohmann::json& doc;
+    const std::string& origin;
+
+    [[noreturn]] void fail(const std::string& name, const std::string& problem) const {
+        throw InputError(origin + "." + name + ": " + problem);
+    }
+    int integer(const std::string& name, int fallback) const {
+        if (!doc.contains(name)) return fallback;
+        if (!doc[name].is_number_integer()) fail(name, "must be an integer");
+        return doc[name].get<int>();
+    }
+    double number(const std::string& name, double fallback) const {
+        if (!doc.contains(name)) return fallback;
+        if (!doc[name].is_number() || !std::isfinite(doc[name].get<double>())) fail(name, "must be a finite number");
+        return doc[name].get<double>();
+    }
+    std::string text(const std::string& name) const {
+        if (!doc.contains(name)) return "";
+        if (!doc[name].is_string()) fail(name, "must be a string");
+        return doc[name].get<std::string>();
+    }
+    std::optional<fs::path> file(const std::string& name, const fs::path& baseDir) const {
+        const std::string value = text(name);
+        if (value.empty()) return std::nullopt;
+        const fs::path path = fs::path(value).is_absolute() || baseDir.empty() ? fs::path(value) : baseDir / value;
+        if (!fs::is_regular_file(path)) fail(name, path.string() + " not found");
+        return path;
+    }
+};
+
 std::string maskName(int frameIndex) {
     char name[32];
     std::snprintf(name, sizeof name, "masks/mask_%05d.png", frameIndex);
@@ -278,6 +310,54 @@ void writeJson(const nlohmann::json& doc, const fs::path& file) {
 }
 
 }  // namespace
+
+ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
+    if (!doc.is_object()) throw InputError(origin + ": must be an object");
+    static const std::vector<std::string> known{
+        "first", "last", "step", "fps", "background_frames", "clean_plate", "exclude_mask", "exclude_polygons",
+        "weights", "mog2_variance_threshold", "mog2_minimum_variance", "compensate_gain", "threshold",
+        "close_kernel_px", "open_kernel_px"};
+    for (const auto& [name, value] : doc.items())
+        if (std::find(known.begin(), known.end(), name) == known.end())
+            throw InputError(origin + "." + name + ": unknown extraction option");
+    const OptionReader in{doc, origin};
+    ExtractionOptions o;
+    o.first = in.integer("first", o.first);
+    o.last = in.integer("last", o.last);
+    o.step = in.integer("step", o.step);
+    if (doc.contains("fps")) o.fps = in.number("fps", 0);
+    o.backgroundFrames = in.integer("background_frames", o.backgroundFrames);
+    o.cleanPlate = in.file("clean_plate", baseDir);
+    o.excludeMask = in.file("exclude_mask", baseDir);
+    if (doc.contains("exclude_polygons")) {
+        try {
+            for (const auto& polygon : doc["exclude_polygons"]) {
+                o.excludePolygons.emplace_back();
+                for (const auto& point : polygon)
+                    o.excludePolygons.back().emplace_back(point.at(0).get<double>(), point.at(1).get<double>());
+            }
+        } catch (const nlohmann::json::exception&) {
+            in.fail("exclude_polygons", "must be [[[x, y], ...], ...] in pixels");
+        }
+    }
+    o.weights = in.text("weights");
+    o.varianceThreshold = in.number("mog2_variance_threshold", o.varianceThreshold);
+    o.minimumVariance = in.number("mog2_minimum_variance", o.minimumVariance);
+    if (doc.contains("compensate_gain")) {
+        if (!doc["compensate_gain"].is_boolean()) in.fail("compensate_gain", "must be true or false");
+        o.compensateGain = doc["compensate_gain"].get<bool>();
+    }
+    o.threshold = in.integer("threshold", o.threshold);
+    o.closeKernel = in.integer("close_kernel_px", o.closeKernel);
+    o.openKernel = in.integer("open_kernel_px", o.openKernel);
+    try {
+        validateOptions(o);
+        parseFrameWeights(o.weights, {});
+    } catch (const InputError& e) {
+        throw InputError(origin + ": " + e.what());
+    }
+    return o;
+}
 
 ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOptions& options, const fs::path& outDir,
                                      const ProgressCallback& progress, const std::atomic<bool>* cancel) {

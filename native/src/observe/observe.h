@@ -90,6 +90,15 @@ ReferenceManifest extractSilhouettes(const std::filesystem::path& source, const 
 
 ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
 
+// ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
+// manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
+// exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
+// mog2_minimum_variance, compensate_gain, threshold, close_kernel_px, open_kernel_px. Missing names
+// keep their defaults; paths resolve against `baseDir` ("" = none). Unknown names, wrong types, bad
+// values and missing files throw InputError("<origin>.<name>: ...").
+ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin,
+                                         const std::filesystem::path& baseDir);
+
 // ω for each extracted frame from an ExtractionOptions::weights string. Throws InputError.
 std::vector<double> parseFrameWeights(const std::string& spec, const std::vector<int>& frames);
 

@@ -106,11 +106,21 @@ sim::Particles readParticles(const std::filesystem::path& file) {
 
 void writeObj(const std::filesystem::path& file, const std::vector<openvdb::Vec3s>& points,
               const std::vector<openvdb::Vec3I>& triangles) {
+    TriangleMesh mesh;
+    mesh.vertices.reserve(points.size());
+    for (const auto& p : points) mesh.vertices.emplace_back(p.x(), p.y(), p.z());
+    mesh.triangles.reserve(triangles.size());
+    // OpenVDB's winding faces inward for level sets; OBJ expects counter-clockwise outward faces.
+    for (const auto& t : triangles) mesh.triangles.emplace_back(t[0], t[2], t[1]);
+    writeObj(file, mesh);
+}
+
+void writeObj(const std::filesystem::path& file, const TriangleMesh& mesh) {
     std::ofstream out(file);
     if (!out) throw std::runtime_error("cannot write " + file.string());
-    for (const auto& p : points) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
-    // OpenVDB's winding faces inward for level sets; OBJ expects counter-clockwise outward faces.
-    for (const auto& t : triangles) out << "f " << t[0] + 1 << ' ' << t[2] + 1 << ' ' << t[1] + 1 << '\n';
+    for (const auto& p : mesh.vertices) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+    for (const auto& t : mesh.triangles) out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+    if (!out) throw std::runtime_error("cannot write " + file.string());
 }
 
 }  // namespace viscoscope::surface

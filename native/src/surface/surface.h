@@ -6,6 +6,7 @@
 //   particles_NNNNN.bin  particles, little-endian: char[4] "VSCP", uint32 version (1),
 //                     uint64 count, then count × {float32 position[3], float32 velocity[3]}.
 //   frame_NNNNN.obj   optional triangle mesh of the surface.
+// Also: the boundaries of the scene's solids as meshes, and the comparison of two simulations' fields.
 #pragma once
 
 #include "sim/sim.h"
@@ -34,7 +35,39 @@ void writeFrameVdb(const std::filesystem::path& file, const sim::Simulation& sim
                    openvdb::FloatGrid::Ptr levelSet);
 void writeParticles(const std::filesystem::path& file, const sim::Particles& particles);
 sim::Particles readParticles(const std::filesystem::path& file);
+// OpenVDB's level-set meshes face inward; this writes them flipped, facing outward.
 void writeObj(const std::filesystem::path& file, const std::vector<openvdb::Vec3s>& points,
               const std::vector<openvdb::Vec3I>& triangles);
+// Writes the triangles with the winding they have.
+void writeObj(const std::filesystem::path& file, const TriangleMesh& mesh);
+
+// The boundary of a scene solid as outward-facing triangles, for rendering it and projecting it.
+// A cup is built from its parameters as a surface of revolution with `segments` sides: its exact
+// dimensions and sharp rims (a mesh of the sampled signed distance would round them off at the
+// voxel size, and its outline would not be the one Blender draws). A box is 12 triangles, a mesh
+// solid its file; the ground plane has no finite boundary and gives an empty mesh.
+TriangleMesh solidBoundary(const Solid& solid, int segments = 96);
+
+// The grids of one frame_NNNNN.vdb. Throws InputError naming the file and the grid.
+struct FrameFields {
+    openvdb::FloatGrid::Ptr surface, pressure;
+    openvdb::Vec3fGrid::Ptr velocity;
+};
+FrameFields readFrameFields(const std::filesystem::path& file);
+
+// Sums for relative L2 errors of a simulation's velocity and pressure against a reference's, taken
+// at the reference's cell centres (its active velocity voxels) where both surfaces are inside the
+// liquid (φ < 0). The simulation's grids are sampled trilinearly (openvdb BoxSampler), so the two
+// may have different resolutions. Sums of several frames add up to the error over all of them.
+struct FieldDifference {
+    long samples = 0;
+    double velocityError2 = 0, velocityNorm2 = 0;  // Σ|v − v_ref|², Σ|v_ref|²
+    double pressureError2 = 0, pressureNorm2 = 0;  // Σ(p − p_ref)², Σp_ref²
+    FieldDifference& operator+=(const FieldDifference& other);
+    // sqrt(error² / norm²); NaN when the reference is zero there (e.g. the liquid at rest in frame 0).
+    double relativeVelocityError() const;
+    double relativePressureError() const;
+};
+FieldDifference compareFields(const FrameFields& reference, const FrameFields& simulation);
 
 }  // namespace viscoscope::surface

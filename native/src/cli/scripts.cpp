@@ -1,0 +1,24 @@
+#include "cli/scripts.h"
+
+#include <cstdlib>
+
+namespace viscoscope::cli {
+
+namespace fs = std::filesystem;
+
+std::optional<fs::path> findScript(const std::string& name) {
+    if (const char* dir = std::getenv("VISCOSCOPE_SCRIPTS")) {
+        const fs::path p = fs::path(dir) / name;
+        if (fs::exists(p)) return p;
+    }
+    std::error_code ec;
+    fs::path here = fs::read_symlink("/proc/self/exe", ec).parent_path();
+    for (int up = 0; up < 6 && !here.empty(); ++up, here = here.parent_path()) {
+        const fs::path p = here / "scripts" / name;
+        if (fs::exists(p)) return p;
+        if (here == here.parent_path()) break;
+    }
+    return std::nullopt;
+}
+
+}  // namespace viscoscope::cli

@@ -1,0 +1,21 @@
+// The simulation folder that `simulate` writes and `synth` and `compare` read.
+#pragma once
+
+#include "cli/progress.h"
+#include "scene/scene.h"
+
+#include <filesystem>
+#include <string>
+
+namespace viscoscope::cli {
+
+// "prefix_NNNNN.ext": the name of frame NNNNN's file (frame 0 is the initial state).
+std::string frameName(const char* prefix, int frame, const char* ext);
+
+// Runs `scene` and writes its per-frame files (surface/surface.h) into `dir` as each frame is
+// reached, then DIR/simulation.json last, so that its presence marks a complete run. Progress events
+// say "stage": "simulate". Returns kExitOk, or kExitCancelled once g_cancelRequested is raised (the
+// frames written so far stay). Throws InputError when `dir` cannot be created.
+int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress);
+
+}  // namespace viscoscope::cli

@@ -1,0 +1,154 @@
+#!/usr/bin/python3
+"""Table 1 of Takahashi & Lin 2019 for Viscoscope: viscosity recovered from synthetic references.
+
+For each true η, with the built engine only:
+  1. `viscoscope synth` the capture scene (sample_scenes/capture_cup.json) at η, at the reference
+     resolution and seed, seen by a side camera that sees the cup and the puddle: a Blender-rendered
+     mp4, its clean plate and the cup's exclusion mask;
+  2. a job whose reference is that clip (extracted like footage: MOG2 against the clean plate, the cup
+     excluded, frame 0 weighted 0) and whose identification runs at another resolution and seed;
+  3. `viscoscope identify`, which also re-simulates θ* at the identification resolution and writes
+     its fields (OUT/fields/frame_*.vdb);
+  4. `viscoscope compare` of those fields against the reference simulation's hidden ones;
+and prints η_true, η*, ε_η = |η* − η|/η, ε_p, ε_v, the evaluations and the wall times.
+
+The defaults are the issue's target (reference 64³, identification 48³, 60 frames) and take hours;
+try it small first:
+
+    /usr/bin/python3 tests/bench/identification_table.py --etas 1,10,100 \\
+        --reference-resolution 32 --resolution 24 --frames 24
+"""
+import argparse
+import json
+import math
+import pathlib
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+def side_camera(width, height, focal_px):
+    """A "viscoscope.camera" 0.45 m in front of the cup (−y), slightly above it, aimed between the
+    cup and the ground so that both the cup and the puddle under it are in the picture."""
+    centre = (0.0, -0.45, 0.12)
+    target = (0.0, 0.0, 0.07)
+    forward = normalized([t - c for t, c in zip(target, centre)])
+    right = normalized(cross(forward, (0.0, 0.0, 1.0)))
+    down = cross(forward, right)
+    rotation = [right, down, forward]
+    translation = [-sum(r * c for r, c in zip(row, centre)) for row in rotation]
+    return {"format": "viscoscope.camera", "version": 1, "width": width, "height": height,
+            "K": [[focal_px, 0, (width - 1) / 2], [0, focal_px, (height - 1) / 2], [0, 0, 1]],
+            "distortion": [0, 0, 0, 0, 0], "R": rotation, "t": translation}
+
+
+def cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def normalized(v):
+    length = math.sqrt(sum(x * x for x in v))
+    return tuple(x / length for x in v)
+
+
+def run(command, log):
+    """Runs an engine command; on failure prints its stderr and stops."""
+    started = time.monotonic()
+    with open(log, "w", encoding="utf-8") as out:
+        result = subprocess.run([str(c) for c in command], stdout=subprocess.PIPE, stderr=out, text=True)
+    if result.returncode != 0:
+        sys.exit(f"{' '.join(str(c) for c in command)} failed (exit {result.returncode}):\n"
+                 + pathlib.Path(log).read_text(encoding="utf-8"))
+    return result.stdout, time.monotonic() - started
+
+
+def one_row(args, eta, work):
+    work.mkdir(parents=True, exist_ok=True)
+    camera = work / "side_camera.json"
+    camera.write_text(json.dumps(side_camera(args.width, args.height, args.focal)))
+    synth = work / "synth"
+    _, synth_s = run([args.engine, "synth", args.scene, "--camera", camera, "--out", synth,
+                      "--resolution", args.reference_resolution, "--seed", args.reference_seed,
+                      "--viscosity", eta, "--frames", args.frames, "--samples", args.samples,
+                      "--progress", "none"], work / "synth.log")
+    initial = math.sqrt(args.eta_min * args.eta_max)  # the same start for every η: the geometric middle
+    job = {
+        "format": "viscoscope.job", "version": 1,
+        "scene": str(pathlib.Path(args.scene).resolve()),
+        "camera": "synth/camera.json",
+        "video": "synth/reference.mp4",
+        "extraction": {"clean_plate": "synth/clean_plate.png", "exclude_mask": "synth/exclude.png",
+                       "weights": "0:0"},  # frame 0 is the same for every η
+        "parameters": [{"name": "viscosity", "initial": initial, "spread": 3 * initial,
+                        "min": args.eta_min, "max": args.eta_max, "log": True}],
+        "resolution": args.resolution,
+        "max_generations": args.generations,
+        "seed": args.seed,
+    }
+    (work / "job.json").write_text(json.dumps(job, indent=1))
+    identify = [args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress", "none",
+                "--no-plots"]
+    if args.threads:
+        identify += ["--threads", args.threads]
+    _, identify_s = run(identify, work / "identify.log")
+    result = json.loads((work / "identify" / "result.json").read_text())
+    compared, _ = run([args.engine, "compare", "--reference", synth / "simulation", "--sim", work / "identify" / "fields"],
+                      work / "compare.log")
+    fields = json.loads(compared)
+    eta_star = result["viscosity"]["value"]
+    return {"eta": eta, "eta_star": eta_star, "eps_eta": abs(eta_star - eta) / eta,
+            "eps_p": fields["epsilon_p"], "eps_v": fields["epsilon_v"],
+            "evaluations": result["evaluations"], "identify_s": identify_s, "synth_s": synth_s,
+            "interval": result["viscosity"]["interval"]}
+
+
+def percent(x):
+    return "   n/a" if x is None else f"{100 * x:6.1f}"
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--etas", default="1,3,10,30,100,300", help="true viscosities, Pa·s, comma-separated")
+    parser.add_argument("--reference-resolution", type=int, default=64, help="synth's resolution")
+    parser.add_argument("--resolution", type=int, default=48, help="the identification's resolution")
+    parser.add_argument("--frames", type=int, default=60, help="frames after the initial one (at the scene's fps)")
+    parser.add_argument("--reference-seed", type=int, default=11)
+    parser.add_argument("--seed", type=int, default=3, help="the identification's seed (CMA-ES and particles)")
+    parser.add_argument("--generations", type=int, default=16, help="max_generations of the job")
+    parser.add_argument("--eta-min", type=float, default=0.1)
+    parser.add_argument("--eta-max", type=float, default=3000)
+    parser.add_argument("--samples", type=int, default=8, help="Cycles samples per pixel")
+    parser.add_argument("--width", type=int, default=160)
+    parser.add_argument("--height", type=int, default=120)
+    parser.add_argument("--focal", type=float, default=260, help="focal length in pixels")
+    parser.add_argument("--threads", type=int, default=0, help="identify's worker threads (0 = all cores)")
+    parser.add_argument("--scene", default=str(ROOT / "sample_scenes/capture_cup.json"))
+    parser.add_argument("--engine", default=str(ROOT / "build/bin/viscoscope"))
+    parser.add_argument("--keep", metavar="DIR", help="work in DIR and keep it (default: a temporary folder)")
+    args = parser.parse_args()
+    etas = [float(x) for x in args.etas.split(",")]
+
+    root = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="viscoscope_table_"))
+    print(f"reference {args.reference_resolution}³ seed {args.reference_seed}, identification {args.resolution}³ "
+          f"seed {args.seed}, {args.frames} frames, {args.width}x{args.height} camera, {args.samples} spp; "
+          f"work in {root}", flush=True)
+    header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'evals':>6} "
+              f"{'identify s':>10} {'synth s':>8}  interval")
+    print(header, flush=True)
+    try:
+        for eta in etas:
+            row = one_row(args, eta, root / f"eta_{eta:g}")
+            print(f"{row['eta']:8g} {row['eta_star']:9.4g} {percent(row['eps_eta'])} {percent(row['eps_p'])} "
+                  f"{percent(row['eps_v'])} {row['evaluations']:6d} {row['identify_s']:10.1f} {row['synth_s']:8.1f}  "
+                  f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]", flush=True)
+    finally:
+        if not args.keep:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,75 @@
+// Meshes of the scene's solids (surface::solidBoundary): closed, facing outward, and enclosing
+// exactly the volume of the solid they stand for (the cup's N-gon cross-sections included).
+#include "surface/surface.h"
+
+#include <Eigen/Geometry>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+#include <tuple>
+
+using namespace viscoscope;
+
+namespace {
+
+// Σ v0·(v1 × v2) / 6: the enclosed volume, positive when every face points outward.
+double signedVolume(const TriangleMesh& mesh) {
+    double volume = 0;
+    for (const Eigen::Vector3i& t : mesh.triangles)
+        volume += mesh.vertices[t[0]].dot(mesh.vertices[t[1]].cross(mesh.vertices[t[2]])) / 6;
+    return volume;
+}
+
+// Every edge, welded by position, is used once in each direction: no holes, consistent winding.
+bool closedAndConsistent(const TriangleMesh& mesh) {
+    std::map<std::tuple<long, long, long>, int> ids;
+    const auto id = [&](const Eigen::Vector3d& p) {
+        const auto key = std::make_tuple(std::lround(p.x() * 1e9), std::lround(p.y() * 1e9), std::lround(p.z() * 1e9));
+        return ids.emplace(key, static_cast<int>(ids.size())).first->second;
+    };
+    std::map<std::pair<int, int>, int> directed;
+    for (const Eigen::Vector3i& t : mesh.triangles)
+        for (int e = 0; e < 3; ++e) ++directed[{id(mesh.vertices[t[e]]), id(mesh.vertices[t[(e + 1) % 3]])}];
+    for (const auto& [edge, count] : directed) {
+        const auto reverse = directed.find({edge.second, edge.first});
+        if (count != 1 || reverse == directed.end() || reverse->second != 1) return false;
+    }
+    return !directed.empty();
+}
+
+}  // namespace
+
+TEST(SolidBoundary, CupIsClosedAndHoldsItsVolume) {
+    for (double hole : {0.009, 0.0}) {
+        CupSolid cup;
+        cup.position = {0.01, -0.02, 0.1};
+        cup.innerRadius = 0.043;
+        cup.height = 0.05;
+        cup.wallThickness = 0.006;
+        cup.bottomThickness = 0.005;
+        cup.holeRadius = hole;
+        for (int segments : {7, 96}) {
+            const TriangleMesh mesh = surface::solidBoundary(cup, segments);
+            const double outer = cup.innerRadius + cup.wallThickness;
+            // Each horizontal slice is an annulus of regular N-gons: area (N/2) sin(2π/N) (R² − r²).
+            const double ngon = segments / 2.0 * std::sin(2 * M_PI / segments);
+            const double expected = ngon * ((outer * outer - hole * hole) * cup.bottomThickness +
+                                             (outer * outer - cup.innerRadius * cup.innerRadius) * cup.height);
+            EXPECT_NEAR(signedVolume(mesh), expected, 1e-12) << "hole " << hole << ", " << segments << " sides";
+            EXPECT_TRUE(closedAndConsistent(mesh)) << "hole " << hole << ", " << segments << " sides";
+            for (const Eigen::Vector3d& v : mesh.vertices) {
+                EXPECT_GE(v.z(), cup.position.z() - 1e-15);
+                EXPECT_LE(std::hypot(v.x() - cup.position.x(), v.y() - cup.position.y()), outer + 1e-15);
+            }
+        }
+    }
+}
+
+TEST(SolidBoundary, BoxIsClosedAndGroundIsEmpty) {
+    const TriangleMesh box = surface::solidBoundary(BoxSolid{{-0.1, 0.2, 0.0}, {0.3, 0.25, 0.07}});
+    EXPECT_EQ(box.triangles.size(), 12u);
+    EXPECT_NEAR(signedVolume(box), 0.4 * 0.05 * 0.07, 1e-15);
+    EXPECT_TRUE(closedAndConsistent(box));
+    EXPECT_TRUE(surface::solidBoundary(GroundSolid{0.0}).triangles.empty());
+}
