@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cmath>
 #include <map>
@@ -72,4 +73,30 @@ TEST(SolidBoundary, BoxIsClosedAndGroundIsEmpty) {
     EXPECT_NEAR(signedVolume(box), 0.4 * 0.05 * 0.07, 1e-15);
     EXPECT_TRUE(closedAndConsistent(box));
     EXPECT_TRUE(surface::solidBoundary(GroundSolid{0.0}).triangles.empty());
+}
+
+// The particle spheres of liquid resting on the ground reach below it; clipping removes exactly
+// that and leaves the liquid above the ground as it was.
+TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
+    const nlohmann::json doc = {
+        {"format", "viscoscope.scene"}, {"version", 1},
+        {"domain", {{"min", {0, 0, 0}}, {"max", {0.04, 0.04, 0.04}}, {"resolution", 16}}},
+        {"solids", {{{"type", "ground"}, {"height", 0.01}}}},
+        {"liquids", {{{"type", "box"}, {"min", {0.01, 0.01, 0.01}}, {"max", {0.03, 0.03, 0.02}}}}},
+        {"material", {{"density", 1000}, {"viscosity", 1.0}}}, {"fps", 30}, {"frames", 1}};
+    const sim::Simulation simulation(parseScene(doc, "clip"));
+    const auto levelSet = surface::liquidLevelSet(simulation.particles().position, simulation.grid().dx);
+    auto insideVoxels = [&](bool below) {
+        int count = 0;
+        for (auto v = levelSet->cbeginValueOn(); v; ++v) {
+            const double z = levelSet->transform().indexToWorld(v.getCoord()).z();
+            if (*v < 0 && (below ? z < 0.01 : z > 0.01)) ++count;
+        }
+        return count;
+    };
+    const int belowBefore = insideVoxels(true), aboveBefore = insideVoxels(false);
+    ASSERT_GT(belowBefore, 0);  // otherwise there is nothing to clip and the test proves nothing
+    surface::clipToSolidExterior(*levelSet, simulation);
+    EXPECT_EQ(insideVoxels(true), 0);
+    EXPECT_EQ(insideVoxels(false), aboveBefore);
 }

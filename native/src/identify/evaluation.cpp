@@ -96,6 +96,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         for (size_t i = 0; i < count; ++i) {
             if (obs.simFrames[i] != frame) continue;
             const auto levelSet = surface::liquidLevelSet(simulation.particles().position, scene.cellSize());
+            surface::clipToSolidExterior(*levelSet, simulation);
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
             ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared);

@@ -27,6 +27,15 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
                                  Eigen::Vector3d::Zero(), options.smoothingPasses);
 }
 
+void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::Simulation& simulation) {
+    const openvdb::math::Transform& transform = levelSet.transform();
+    for (auto voxel = levelSet.tree().beginValueOn(); voxel; ++voxel) {
+        const openvdb::Vec3d x = transform.indexToWorld(voxel.getCoord());
+        const double outside = -simulation.solidDistance(Eigen::Vector3d(x.x(), x.y(), x.z()));
+        if (outside > *voxel) voxel.setValue(static_cast<float>(outside));
+    }
+}
+
 void meshLevelSet(const openvdb::FloatGrid& levelSet, std::vector<openvdb::Vec3s>& points,
                   std::vector<openvdb::Vec3I>& triangles) {
     std::vector<openvdb::Vec4I> quads;

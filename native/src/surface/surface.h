@@ -27,6 +27,11 @@ struct SurfaceOptions {
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
                                        const SurfaceOptions& options = {});
 
+// Removes what lies inside the simulation's solids from a liquid level set, φ ← max(φ, −d_solid):
+// the particle spheres reach a fraction of a cell below the ground and into walls, where no
+// camera can see liquid, and a silhouette compared with footage must not include it.
+void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::Simulation& simulation);
+
 // Triangles of the zero iso-surface (quads split in two).
 void meshLevelSet(const openvdb::FloatGrid& levelSet, std::vector<openvdb::Vec3s>& points,
                   std::vector<openvdb::Vec3I>& triangles);
