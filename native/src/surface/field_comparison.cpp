@@ -18,6 +18,30 @@ typename GridType::Ptr readGrid(openvdb::io::File& file, const std::string& name
     return grid;
 }
 
+// Is every voxel of the 3×3×3 block around `ijk` active? Only such cells are inside the liquid,
+// away from the cut cells at walls and the free surface, whose values stand for a partial volume
+// and cannot be compared pointwise between grids of different resolution.
+template <typename Accessor>
+bool interior(const Accessor& active, const openvdb::Coord& ijk) {
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx)
+                if (!active.isValueOn(ijk.offsetBy(dx, dy, dz))) return false;
+    return true;
+}
+
+// Are all eight voxels a trilinear sample at world position x reads active (written)?
+template <typename GridType>
+bool stencilWritten(const GridType& grid, typename GridType::ConstAccessor& access, const openvdb::Vec3d& x) {
+    const openvdb::Vec3d index = grid.worldToIndex(x);
+    const openvdb::Coord base(openvdb::Coord::floor(index));
+    for (int dz = 0; dz <= 1; ++dz)
+        for (int dy = 0; dy <= 1; ++dy)
+            for (int dx = 0; dx <= 1; ++dx)
+                if (!access.isValueOn(base.offsetBy(dx, dy, dz))) return false;
+    return true;
+}
+
 double ratio(double error2, double norm2) {
     return norm2 > 0 ? std::sqrt(error2 / norm2) : std::numeric_limits<double>::quiet_NaN();
 }
@@ -57,11 +81,15 @@ FieldDifference compareFields(const FrameFields& reference, const FrameFields& s
     const FloatSampler referenceSurface(*reference.surface), referencePressure(*reference.pressure),
         simulationSurface(*simulation.surface), simulationPressure(*simulation.pressure);
     const openvdb::tools::GridSampler<openvdb::Vec3fGrid, BoxSampler> simulationVelocity(*simulation.velocity);
+    auto referenceActive = reference.velocity->getConstAccessor();
+    auto simulationActive = simulation.velocity->getConstAccessor();
     FieldDifference d;
     for (auto voxel = reference.velocity->cbeginValueOn(); voxel; ++voxel) {
         if (!voxel.isVoxelValue()) continue;
         const openvdb::Vec3d x = reference.velocity->indexToWorld(voxel.getCoord());
         if (!(referenceSurface.wsSample(x) < 0 && simulationSurface.wsSample(x) < 0)) continue;
+        if (!interior(referenceActive, voxel.getCoord()) || !stencilWritten(*simulation.velocity, simulationActive, x))
+            continue;
         // x is a voxel centre of the reference's grids, so sampling them there reads the stored value.
         const openvdb::Vec3d v = *voxel;
         const double p = referencePressure.wsSample(x);

@@ -62,7 +62,8 @@ FrameFields readFrameFields(const std::filesystem::path& file);
 
 // Sums for relative L2 errors of a simulation's velocity and pressure against a reference's, taken
 // at the reference's cell centres (its active velocity voxels) where both surfaces are inside the
-// liquid (φ < 0). The simulation's grids are sampled trilinearly (openvdb BoxSampler), so the two
+// liquid (φ < 0), the reference cell and its 26 neighbours hold liquid, and every voxel the
+// simulation's sample reads was written (cut cells at walls and the surface are left out). The simulation's grids are sampled trilinearly (openvdb BoxSampler), so the two
 // may have different resolutions. Sums of several frames add up to the error over all of them.
 struct FieldDifference {
     long samples = 0;
