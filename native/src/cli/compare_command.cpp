@@ -103,7 +103,8 @@ int runCompare(const CompareArguments& args) {
         {"version", 1},
         {"reference", referenceDir.string()},
         {"sim", simDir.string()},
-        {"sampling", "reference cell centres inside both surfaces; the simulation sampled trilinearly there"},
+        {"sampling", "reference cell centres inside both surfaces whose 26 neighbours hold liquid; the simulation "
+                     "sampled trilinearly there, where all eight voxels it reads were written"},
         {"epsilon_v", finiteOrNull(total.relativeVelocityError())},
         {"epsilon_p", finiteOrNull(total.relativePressureError())},
         {"samples", total.samples},
