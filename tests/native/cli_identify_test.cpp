@@ -4,6 +4,8 @@
 // Tiny problem: 16³ (coarse 11³) grid, 2–3 reference frames, λ = 4, 2–3 generations. The reference
 // masks here are hand-drawn PGM rectangles (this test links no OpenCV); identify_loop_test checks
 // the recovered viscosity on a simulated reference.
+#include "cli_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -23,17 +25,9 @@ using json = nlohmann::json;
 
 namespace {
 
-std::string slurp(const fs::path& file) {
-    std::ifstream stream(file);
-    std::stringstream text;
-    text << stream.rdbuf();
-    return text.str();
-}
-
-struct CommandResult {
-    int exitCode;
-    std::string out, err;
-};
+using viscoscope::cli_test::CommandResult;
+using viscoscope::cli_test::runViscoscope;
+using viscoscope::cli_test::slurp;
 
 class CliIdentify : public ::testing::Test {
 protected:
@@ -122,12 +116,7 @@ protected:
         return dir_ / name;
     }
 
-    CommandResult run(const std::string& arguments) const {
-        const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir_ / "stdout").string() +
-                                    " 2> " + (dir_ / "stderr").string();
-        const int status = std::system(command.c_str());
-        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir_ / "stdout"), slurp(dir_ / "stderr")};
-    }
+    CommandResult run(const std::string& arguments) const { return runViscoscope(arguments, dir_); }
 
     // Starts identify in the background on one thread (the foreground runs use all cores, so a resumed
     // run that matches an uninterrupted one also shows the result does not depend on the thread count).

@@ -1,5 +1,7 @@
 // The extract / score / camera commands as a user runs them: good runs, and bad input that must
 // end with exit code 2, one line on stderr, and no complete-looking output.
+#include "cli_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -16,17 +18,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct CommandResult {
-    int exitCode;
-    std::string out, err;
-};
-
-std::string slurp(const fs::path& file) {
-    std::ifstream stream(file);
-    std::stringstream text;
-    text << stream.rdbuf();
-    return text.str();
-}
+using viscoscope::cli_test::CommandResult;
+using viscoscope::cli_test::runViscoscope;
+using viscoscope::cli_test::slurp;
 
 class CliObserve : public ::testing::Test {
 protected:
@@ -39,12 +33,7 @@ protected:
         if (std::system("ffmpeg -version > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg not installed";
     }
 
-    CommandResult run(const std::string& arguments) const {
-        const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir_ / "stdout").string() +
-                                    " 2> " + (dir_ / "stderr").string();
-        const int status = std::system(command.c_str());
-        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir_ / "stdout"), slurp(dir_ / "stderr")};
-    }
+    CommandResult run(const std::string& arguments) const { return runViscoscope(arguments, dir_); }
 
     // A short test-pattern clip made by the ffmpeg tool (this test links no OpenCV).
     fs::path makeVideo(const std::string& name, int frames) const {

@@ -4,6 +4,8 @@
 // the pixels the container does not hide); SIGTERM while Blender renders stops it and exits 3.
 // compare gives 0 for a simulation against itself and a finite error against another resolution.
 // Blender-dependent cases skip when blender is not installed.
+#include "cli_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -23,17 +25,9 @@ using json = nlohmann::json;
 
 namespace {
 
-struct CommandResult {
-    int exitCode;
-    std::string out, err;
-};
-
-std::string slurp(const fs::path& file) {
-    std::ifstream stream(file);
-    std::stringstream text;
-    text << stream.rdbuf();
-    return text.str();
-}
+using viscoscope::cli_test::CommandResult;
+using viscoscope::cli_test::runViscoscope;
+using viscoscope::cli_test::slurp;
 
 bool blenderInstalled() { return std::system("blender --version > /dev/null 2>&1") == 0; }
 
@@ -79,12 +73,7 @@ protected:
         std::ofstream(dir_ / name) << text;
         return dir_ / name;
     }
-    CommandResult run(const std::string& arguments) const {
-        const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir_ / "stdout").string() +
-                                    " 2> " + (dir_ / "stderr").string();
-        const int status = std::system(command.c_str());
-        return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir_ / "stdout"), slurp(dir_ / "stderr")};
-    }
+    CommandResult run(const std::string& arguments) const { return runViscoscope(arguments, dir_); }
     std::string synth(const fs::path& scene, const fs::path& camera, const std::string& extra = "") const {
         return "synth " + scene.string() + " --camera " + camera.string() + " --out " + (dir_ / "out").string() +
                " --progress none " + extra;
