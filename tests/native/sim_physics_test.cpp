@@ -323,7 +323,8 @@ TEST(Physics, FallingViscousThreadCoils) {
                     scheme, s.grid().cells.x(), excursion / radius, winding / (2 * M_PI),
                     std::max(turnsForward, turnsBack), std::min(turnsForward, turnsBack), seconds);
         // Both schemes buckle the thread; the claim that it coils is the unified scheme's. The
-        // decoupled baseline is printed for comparison (measured: it folds back and forth instead).
+        // decoupled baseline is printed for comparison (measured: at 44 cells it folds back and forth,
+        // 0.1 turns; at 56 it coils, less steadily than the unified scheme: 1.2 turns against 3.3).
         EXPECT_GT(excursion, radius) << scheme;
         if (std::string(scheme) == "unified") EXPECT_GT(std::abs(winding) / (2 * M_PI), 1.0);
     }
