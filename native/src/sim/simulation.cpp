@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <openvdb/tools/GridOperators.h>
+#include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/LevelSetFilter.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
 #include <tbb/parallel_for.h>
@@ -26,8 +27,10 @@ constexpr double kKernelRadius = 1.5;
 // Particles are kept this far (in cells) outside solids after advection.
 constexpr double kSolidMargin = 0.05;
 // The level set surface tension takes its curvature from: sphere radius (cells) and Gaussian passes.
+// Each pass moves a curved surface inwards (as curvature flow does); with two passes a drop of 6
+// cells read 10 % too much pressure, with one 2.4 %.
 constexpr double kSurfaceParticleRadius = 0.75;
-constexpr int kCurvatureSmoothing = 2;
+constexpr int kCurvatureSmoothing = 1;
 // Narrow-band half-width (voxels) of that level set: what its curvature stencil and smoothing need.
 constexpr double kCurvatureBandWidth = 2.0;
 // Volume correction (after Kim et al. 2007): the liquid the grid sees drifts where particle layers
@@ -389,10 +392,24 @@ void Simulation::applySurfaceTension(double dt) {
     // Curvature differentiates twice, so it is taken on OpenVDB's smoothed particle level set
     // (cell-aligned voxels); the kernel-averaged distance used for the fractions gave parasitic
     // currents two to three times larger in the hydrostatic test.
-    auto levelSet = particleLevelSet(particles_.position, kSurfaceParticleRadius * dx, dx, grid_.origin,
+    // Particles near a wall are mirrored into it, so that the surface meets the wall at a right
+    // angle (neutral wetting) instead of rounding off over it like a free edge: that false bend at
+    // every contact line drove the largest parasitic currents in a resting pool (8.7 → 5.7 mm/s).
+    std::vector<Vec3> surfacePoints = particles_.position;
+    const double mirrorReach = (kSurfaceParticleRadius + kCurvatureBandWidth + 1) * dx;
+    for (const Vec3& x : particles_.position) {
+        const double d = solids_->distance(x);
+        if (d >= mirrorReach) continue;
+        const Vec3 image = x - 2 * d * solids_->normal(x);
+        if (solids_->distance(image) < 0) surfacePoints.push_back(image);  // not through a thin wall
+    }
+    auto levelSet = particleLevelSet(surfacePoints, kSurfaceParticleRadius * dx, dx, grid_.origin,
                                      kCurvatureSmoothing, kCurvatureBandWidth);
     const auto curvature = openvdb::tools::meanCurvature(*levelSet);
     const auto curvatureAccess = curvature->getConstAccessor();
+    const auto distanceAccess = levelSet->getConstAccessor();
+    const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> curvatureAt(
+        curvatureAccess, curvature->transform());
     Field pressureOutside(cells);
     for (int c = 0; c < cells.count(); ++c) {
         if (fractions_.cell[c] >= 1) continue;
@@ -402,8 +419,23 @@ void Simulation::applySurfaceTension(double dt) {
             for (int d : {-1, 1})
                 if (const int nb = cells.neighbour(ijk, a, d); nb >= 0 && fractions_.cell[nb] >= kMinWeight) nearLiquid = true;
         if (!nearLiquid) continue;
+        // The jump belongs to the interface, not to the cell centre a fraction of a cell off it
+        // (level sets around a drop of R cells curve as 1/(R + φ): 15 % weaker one cell out), so
+        // the curvature is read at the centre's closest point on the surface, x − φ ∇φ/|∇φ|
+        // (a drop's inside pressure: −33 % → +2.4 % of 2σ/R, parasitic speeds 300× smaller).
+        const openvdb::Coord v(ijk[0], ijk[1], ijk[2]);
+        openvdb::Vec3d normal;
+        for (int a = 0; a < 3; ++a) {
+            openvdb::Coord hi = v, lo = v;
+            ++hi[a];
+            --lo[a];
+            normal[a] = distanceAccess.getValue(hi) - distanceAccess.getValue(lo);
+        }
+        const double phi = distanceAccess.getValue(v);
+        openvdb::Vec3d index(ijk[0], ijk[1], ijk[2]);
+        if (normal.length() > 1e-6 && std::abs(phi) < 2 * dx) index -= (phi / dx) * normal.unitSafe();
         // OpenVDB returns the mean curvature (κ1 + κ2)/2; the Laplace pressure needs κ1 + κ2.
-        const double kappa = 2.0 * curvatureAccess.getValue(openvdb::Coord(ijk[0], ijk[1], ijk[2]));
+        const double kappa = 2.0 * curvatureAt.isSample(index);
         pressureOutside[c] = (1 - fractions_.cell[c]) * sigma * std::clamp(kappa, -2 / dx, 2 / dx);
     }
     for (int a = 0; a < 3; ++a) {
@@ -508,9 +540,11 @@ double Simulation::stableTimeStep() const {
     const double dx = grid_.dx;
     // Gravity can accelerate a resting liquid across a cell within one step; count it in.
     double dt = scene_.solver.cfl * dx / (maxSpeed + std::sqrt(scene_.gravity.norm() * dx) + 1e-12);
-    if (scene_.material.surfaceTension > 0)  // capillary wave limit (Brackbill et al. 1992)
+    // Capillary wave limit (Brackbill et al. 1992) with the mean density of the two sides, ρ/2 at
+    // a free surface.
+    if (scene_.material.surfaceTension > 0)
         dt = std::min(dt, std::sqrt(scene_.material.density * dx * dx * dx /
-                                    (2 * M_PI * scene_.material.surfaceTension)));
+                                    (4 * M_PI * scene_.material.surfaceTension)));
     return dt;
 }
 
