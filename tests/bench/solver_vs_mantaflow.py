@@ -54,6 +54,9 @@ def parse_args():
     p.add_argument("--scene", default=os.path.join(REPO, "sample_scenes", "capture_cup.json"))
     p.add_argument("--viscoscope", default=os.path.join(REPO, "build", "bin", "viscoscope"))
     p.add_argument("--blender", default="/usr/bin/blender")
+    p.add_argument("--surface-tension", type=float,
+                   help="σ in N/m for Viscoscope (default: the scene's). Mantaflow's bake keeps "
+                        "Blender's default surface_tension = 0, so 0 here compares like with like")
     p.add_argument("--skip-mantaflow", action="store_true", help="run Viscoscope only")
     p.add_argument("--workdir", help="keep scenes, outputs and caches here (default: a temp dir, removed)")
     return p.parse_args()
@@ -88,6 +91,8 @@ def run_viscoscope(args, base_scene, res, eta, work, rep):
     scene = json.loads(json.dumps(base_scene))
     scene["domain"]["resolution"] = res
     scene["material"]["viscosity"] = eta
+    if args.surface_tension is not None:
+        scene["material"]["surface_tension"] = args.surface_tension
     scene["frames"] = args.frames
     scene["output"] = {"particles": False, "vdb": False, "mesh": False}
     scene_path = os.path.join(work, tag + ".json")
@@ -215,6 +220,9 @@ def main():
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
                     "load_average_before": load_before, "load_average_after": os.getloadavg()},
         "total_seconds": total, "target_ratio": TARGET_RATIO,
+        "viscoscope_surface_tension": (args.surface_tension if args.surface_tension is not None
+                                       else base_scene["material"].get("surface_tension", 0.0)),
+        "mantaflow_surface_tension": 0.0,
         "notes": [
             "Viscoscope wall = the whole `viscoscope simulate` process (start-up, scene set-up, "
             "all frames); Mantaflow wall = bpy.ops.fluid.bake_all() only (Blender start-up and "
@@ -289,6 +297,8 @@ def print_table(rows, meta):
           f"{meta['machine']['cpus']} CPUs, load {meta['machine']['load_average_before'][0]:.2f} → "
           f"{meta['machine']['load_average_after'][0]:.2f}, Viscoscope {meta['viscoscope']}, "
           f"Blender {meta['blender']}, repeat {meta['repeat']}")
+    print(f"surface tension: Viscoscope σ = {meta['viscoscope_surface_tension']:g} N/m, "
+          f"Mantaflow surface_tension = {meta['mantaflow_surface_tension']:g}")
     header = (f"{'res':>4} {'η Pa·s':>7} | {'VS wall s':>9} {'s/sim s':>8} {'peak MiB':>8} {'it/step':>7} "
               f"{'transfer':>8} {'solve':>6} {'other':>6} {'vol drift':>9} | {'MF bake s':>9} {'MF MiB':>7} "
               f"{'visc_value':>10} | {'VS/MF':>6}")
