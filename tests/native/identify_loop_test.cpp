@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
 #include <openvdb/openvdb.h>
 #include <tbb/task_arena.h>
 
@@ -126,6 +127,38 @@ protected:
     static fs::path dir_;
 };
 fs::path IdentifyLoop::dir_;
+
+// A job that names a video extracts it into OUT/reference once and reuses that while the video
+// and the extraction settings stay the same; when either changes, it extracts again rather than
+// scoring against silhouettes of something else.
+TEST_F(IdentifyLoop, AVideoReferenceIsExtractedAgainWhenItsSourceChanges) {
+    const fs::path clip = dir_ / "clip.mp4", out = dir_ / "video_job_out";
+    {
+        cv::VideoWriter writer(clip.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30, {96, 64});
+        ASSERT_TRUE(writer.isOpened());
+        for (int f = 0; f < 8; ++f) {
+            cv::Mat3b frame(64, 96, cv::Vec3b(90, 90, 90));
+            if (f >= 4) cv::rectangle(frame, {30, 10 + 2 * f, 20, 20}, cv::Scalar(230, 230, 230), cv::FILLED);
+            writer.write(frame);
+        }
+    }
+    json doc = jobJson();
+    doc.erase("silhouettes");
+    doc["video"] = "clip.mp4";
+    doc["extraction"] = {{"background_frames", 3}};
+    auto prepared = [&](const json& d) {
+        identify::Job j = job(d);
+        identify::prepareReference(j, out);
+        return std::make_pair(loadReferenceManifest(j.referenceDir).parameters.at("background_frames").get<int>(),
+                              fs::last_write_time(j.referenceDir / "manifest.json"));
+    };
+    const auto first = prepared(doc);
+    EXPECT_EQ(first.first, 3);
+    EXPECT_EQ(prepared(doc).second, first.second) << "an unchanged source must be reused, not extracted again";
+    doc["extraction"]["background_frames"] = 2;
+    EXPECT_EQ(prepared(doc).first, 2) << "changed extraction settings must extract again";
+    fs::remove_all(out);
+}
 
 TEST_F(IdentifyLoop, EvaluationIsIndependentOfTheThreadCount) {
     const identify::Job j = job(jobJson());

@@ -5,17 +5,58 @@
 #include "sim/sim.h"
 #include "surface/surface.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
 
 namespace viscoscope::identify {
 
 namespace fs = std::filesystem;
 
+namespace {
+// Tells a changed input file from the one used before: its size and time of last write (for a
+// folder of images, each entry's).
+nlohmann::json fileStamp(const fs::path& path) {
+    auto stamp = [](const fs::path& p) {
+        std::error_code error;
+        const auto bytes = fs::is_regular_file(p, error) ? static_cast<long long>(fs::file_size(p, error)) : -1;
+        const auto written = fs::last_write_time(p, error).time_since_epoch().count();
+        return nlohmann::json{{"path", fs::absolute(p).string()}, {"bytes", bytes}, {"written", written}};
+    };
+    nlohmann::json result = stamp(path);
+    std::error_code error;
+    if (fs::is_directory(path, error)) {
+        std::vector<fs::path> entries;
+        for (const auto& entry : fs::directory_iterator(path, error)) entries.push_back(entry.path());
+        std::sort(entries.begin(), entries.end());
+        for (const fs::path& e : entries) result["entries"].push_back(stamp(e));
+    }
+    return result;
+}
+}  // namespace
+
+nlohmann::json referenceSource(const Job& job) {
+    if (!job.video) return nullptr;
+    nlohmann::json source = {{"video", fileStamp(*job.video)},
+                             {"extraction", job.document.value("extraction", nlohmann::json())}};
+    if (job.extraction.cleanPlate) source["clean_plate"] = fileStamp(*job.extraction.cleanPlate);
+    if (job.extraction.excludeMask) source["exclude_mask"] = fileStamp(*job.extraction.excludeMask);
+    return source;
+}
+
 void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>* cancel) {
     if (!job.referenceDir.empty() || !job.video) return;
-    const fs::path dir = outDir / "reference";
-    if (!fs::exists(dir / "manifest.json")) extractSilhouettes(*job.video, job.extraction, dir, {}, cancel);
+    const fs::path dir = outDir / "reference", sourceFile = dir / "source.json";
+    // Silhouettes extracted from another video, plate or settings are extracted again, not reused.
+    const nlohmann::json source = referenceSource(job);
+    nlohmann::json extractedFrom;
+    if (std::ifstream stream(sourceFile); stream) extractedFrom = nlohmann::json::parse(stream, nullptr, false);
+    if (extractedFrom != source || !fs::exists(dir / "manifest.json")) {
+        fs::remove_all(dir);
+        extractSilhouettes(*job.video, job.extraction, dir, {}, cancel);
+        std::ofstream(sourceFile) << source.dump(1) << "\n";
+    }
     job.referenceDir = dir;
     const ReferenceManifest reference = loadReferenceManifest(dir);
     if (reference.width != job.camera.width || reference.height != job.camera.height)

@@ -149,8 +149,12 @@ struct Observation {
 };
 
 // When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
-// job.extraction (once; a finished extraction is reused) and points job.referenceDir there.
+// job.extraction and points job.referenceDir there. A finished extraction is reused while
+// referenceSource(job), kept beside it as source.json, is unchanged.
 void prepareReference(Job& job, const std::filesystem::path& outDir, const std::atomic<bool>* cancel = nullptr);
+// What a video reference is extracted from: the video, clean plate and exclusion mask files (size,
+// time written) and the job's extraction settings; null without a video.
+nlohmann::json referenceSource(const Job& job);
 
 // Loads the reference (checking image size against the camera and that frames remain) and maps
 // reference times onto simulation frames.

@@ -57,8 +57,9 @@ struct FrameStats {
 };
 
 // A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
-// openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian LevelSetFilter passes. Voxel centres
-// sit at `origin` + (i + ½) voxelSize, so with voxelSize = Δx they coincide with the cell centres.
+// openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian passes (tools::Filter, renormalized
+// by tools::LevelSetTracker). Voxel centres sit at `origin` + (i + ½) voxelSize, so with voxelSize =
+// Δx they coincide with the cell centres.
 // `halfWidth` is the narrow band's half-width in voxels.
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
                                          const Vec3& origin, int smoothingPasses, double halfWidth = 3.0);

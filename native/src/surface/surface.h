@@ -1,5 +1,5 @@
 // Particles → liquid surface → files. The surface is an OpenVDB narrow-band level set built with
-// tools::ParticlesToLevelSet and smoothed with tools::LevelSetFilter; it can be meshed with
+// tools::ParticlesToLevelSet and smoothed by Gaussian passes (sim::particleLevelSet); it can be meshed with
 // tools::volumeToMesh. Per-frame files:
 //   frame_NNNNN.vdb   grids "surface" (level set, m), "velocity" (Vec3f, m/s), "pressure" (Pa),
 //                     in world space (Blender's, Z-up, metres), cell-centred at the sim's Δx.
@@ -21,7 +21,7 @@ namespace viscoscope::surface {
 struct SurfaceOptions {
     double voxelsPerCell = 2;      // surface resolution relative to the simulation grid
     double particleRadius = 0.75;  // in simulation cells
-    int smoothingPasses = 1;       // Gaussian LevelSetFilter passes
+    int smoothingPasses = 1;       // Gaussian filter passes
 };
 
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
