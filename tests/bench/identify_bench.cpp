@@ -48,9 +48,11 @@ void writeReference(const Scene& base, double eta, int resolution, int frames, c
     scene.seed = base.seed + 1000;
     const PinholeCamera fine = parseCamera(cameraJson(2), "reference camera");
     sim::Simulation simulation(scene);
-    std::vector<int> numbers;
-    std::vector<double> times, weights;
-    std::vector<std::string> masks;
+    ReferenceManifest manifest;
+    manifest.source = "identify_bench synthetic";
+    manifest.fps = scene.fps;
+    manifest.width = 160;
+    manifest.height = 120;
     for (int frame = 1; frame <= frames; ++frame) {
         simulation.advanceFrame();
         if (frame % 3) continue;  // every third frame
@@ -60,16 +62,12 @@ void writeReference(const Scene& base, double eta, int resolution, int frames, c
         char name[32];
         std::snprintf(name, sizeof name, "masks/mask_%05d.png", frame);
         cv::imwrite((dir / name).string(), cv::Mat1b(small >= 128));
-        numbers.push_back(frame);
-        times.push_back(frame / scene.fps);
-        weights.push_back(1);
-        masks.push_back(name);
+        manifest.frames.push_back(frame);
+        manifest.times.push_back(frame / scene.fps);
+        manifest.weights.push_back(1);
+        manifest.maskFiles.push_back(name);
     }
-    std::ofstream(dir / "manifest.json") << json{{"format", "viscoscope.reference"}, {"version", 1},
-                                                 {"source", "identify_bench synthetic"}, {"fps", scene.fps},
-                                                 {"width", 160}, {"height", 120}, {"frames", numbers},
-                                                 {"times_s", times}, {"weights", weights}, {"masks", masks}}
-                                                    .dump(1);
+    saveReferenceManifest(manifest, dir);
 }
 
 void printRun(const char* label, const identify::IdentificationResult& r, double truth) {

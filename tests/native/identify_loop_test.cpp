@@ -64,11 +64,11 @@ void writeReference(const fs::path& dir) {
     const Scene scene = parseScene(sceneJson(kEtaTrue, 24, 11, 10), "reference scene");
     const PinholeCamera fine = parseCamera(cameraJson(2), "reference camera");
     sim::Simulation simulation(scene);
-    json manifest{{"format", "viscoscope.reference"}, {"version", 1}, {"source", "synthetic: identify_loop_test"},
-                  {"fps", 30.0}, {"width", 96}, {"height", 64}};
-    std::vector<int> frames;
-    std::vector<double> times, weights;
-    std::vector<std::string> masks;
+    ReferenceManifest manifest;
+    manifest.source = "synthetic: identify_loop_test";
+    manifest.fps = 30;
+    manifest.width = 96;
+    manifest.height = 64;
     for (int frame = 1; frame <= 10; ++frame) {
         simulation.advanceFrame();
         if (frame % 2) continue;
@@ -80,16 +80,12 @@ void writeReference(const fs::path& dir) {
         char name[32];
         std::snprintf(name, sizeof name, "masks/mask_%05d.png", frame);
         cv::imwrite((dir / name).string(), mask);
-        frames.push_back(frame);
-        times.push_back(frame / 30.0);
-        weights.push_back(1.0);
-        masks.push_back(name);
+        manifest.frames.push_back(frame);
+        manifest.times.push_back(frame / 30.0);
+        manifest.weights.push_back(1.0);
+        manifest.maskFiles.push_back(name);
     }
-    manifest["frames"] = frames;
-    manifest["times_s"] = times;
-    manifest["weights"] = weights;
-    manifest["masks"] = masks;
-    std::ofstream(dir / "manifest.json") << manifest.dump(1);
+    saveReferenceManifest(manifest, dir);
 }
 
 class IdentifyLoop : public ::testing::Test {

@@ -295,15 +295,13 @@ void requireRangeInSource(const fs::path& source, const ExtractionOptions& optio
                          std::to_string(framesRead - 1) + ")");
 }
 
-nlohmann::json manifestJson(const ReferenceManifest& m) {
-    return {{"format", "viscoscope.reference"}, {"version", 1}, {"source", m.source}, {"fps", m.fps},
-            {"width", m.width}, {"height", m.height}, {"frames", m.frames}, {"times_s", m.times},
-            {"weights", m.weights}, {"masks", m.maskFiles}, {"preview", "preview.png"},
-            {"exclude", m.excludeFile ? nlohmann::json(*m.excludeFile) : nlohmann::json()},
-            {"parameters", m.parameters}};
-}
-
-void writeJson(const nlohmann::json& doc, const fs::path& file) {
+void writeManifest(const ReferenceManifest& m, const fs::path& file) {
+    nlohmann::json doc = {{"format", "viscoscope.reference"}, {"version", 1}, {"source", m.source}, {"fps", m.fps},
+                          {"width", m.width}, {"height", m.height}, {"frames", m.frames}, {"times_s", m.times},
+                          {"weights", m.weights}, {"masks", m.maskFiles},
+                          {"exclude", m.excludeFile ? nlohmann::json(*m.excludeFile) : nlohmann::json()},
+                          {"parameters", m.parameters}};
+    if (fs::exists(file.parent_path() / "preview.png")) doc["preview"] = "preview.png";
     std::ofstream stream(file);
     stream << doc.dump(2) << "\n";
     if (!stream) throw std::runtime_error(file.string() + ": cannot write");
@@ -406,10 +404,14 @@ ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOpt
         outputs.push_back("exclude.png");
     }
     preview.write(output.staged("preview.png"));
-    writeJson(manifestJson(manifest), output.staged("manifest.json"));
+    writeManifest(manifest, output.staged("manifest.json"));
     outputs.push_back("manifest.json");
     output.commit(outputs);
     return manifest;
+}
+
+void saveReferenceManifest(const ReferenceManifest& manifest, const fs::path& directory) {
+    writeManifest(manifest, directory / "manifest.json");
 }
 
 }  // namespace viscoscope

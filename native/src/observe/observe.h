@@ -89,6 +89,9 @@ ReferenceManifest extractSilhouettes(const std::filesystem::path& source, const 
                                      const std::atomic<bool>* cancel = nullptr);
 
 ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
+// Writes `manifest` as directory/manifest.json (the masks it names must be there already), for
+// references made by other means than `extract`, such as synthetic ones in tests and benchmarks.
+void saveReferenceManifest(const ReferenceManifest& manifest, const std::filesystem::path& directory);
 
 // ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
