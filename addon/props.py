@@ -116,6 +116,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                               default=3.0, min=1.01, max=1000.0)
     identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512)
     max_generations: IntProperty(name="Max Generations", default=20, min=1, max=1000)
+    time_budget_minutes: FloatProperty(name="Time Budget (min)", default=10.0, min=0.0, max=10000.0,
+                                       description="Wall time for the whole identification; the engine stops "
+                                                   "before a generation that would overrun it (0 = no limit)")
     # Results
     result_eta: FloatProperty(name="η", default=0.0, precision=4)
     result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)

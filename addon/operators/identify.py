@@ -38,10 +38,12 @@ def write_job(context, folder):
         "video": video,
         "silhouettes": masks if os.path.isfile(os.path.join(masks, "manifest.json")) else None,
         "frame_start": scene.frame_start, "frame_end": scene.frame_end,
-        "parameters": [{"name": "viscosity", "initial": vs.eta_initial, "spread": vs.eta_spread,
-                        "min": 1e-3, "max": 1e4, "log": True}],
+        # The job's spread s is absolute, searched as ln(1 + s/initial); the panel's is a factor f of η.
+        "parameters": [{"name": "viscosity", "initial": vs.eta_initial,
+                        "spread": vs.eta_initial * (vs.eta_spread - 1.0), "min": 1e-3, "max": 1e4, "log": True}],
         "resolution": vs.identify_resolution,
         "max_generations": vs.max_generations,
+        "time_budget_s": vs.time_budget_minutes * 60.0,
         "seed": vs.sim_seed,
     }
     path = os.path.join(folder, "job.json")

@@ -4,7 +4,7 @@
 // (simulation vs silhouettes, per resolution) and the identified η against the truth.
 //
 //   identify_bench [--resolution 24] [--reference-resolution 32] [--frames 30] [--generations 12]
-//                  [--eta 8] [--threads 0] [--keep DIR] [--no-single]
+//                  [--coarse-generations N] [--eta 8] [--threads 0] [--keep DIR] [--no-single]
 //
 // The reference is simulated at --reference-resolution with another particle seed, its surface
 // meshed and filled by the exact rasterizer at twice the scoring camera's resolution, then area-
@@ -88,7 +88,7 @@ void printRun(const char* label, const identify::IdentificationResult& r, double
 }  // namespace
 
 int main(int argc, char** argv) {
-    int resolution = 24, referenceResolution = 32, frames = 30, generations = 12, threads = 0;
+    int resolution = 24, referenceResolution = 32, frames = 30, generations = 12, coarseGenerations = -1, threads = 0;
     double eta = 8;
     bool single = true;
     fs::path keep;
@@ -98,6 +98,7 @@ int main(int argc, char** argv) {
         else if (!std::strcmp(argv[i], "--reference-resolution")) referenceResolution = std::atoi(next());
         else if (!std::strcmp(argv[i], "--frames")) frames = std::atoi(next());
         else if (!std::strcmp(argv[i], "--generations")) generations = std::atoi(next());
+        else if (!std::strcmp(argv[i], "--coarse-generations")) coarseGenerations = std::atoi(next());
         else if (!std::strcmp(argv[i], "--eta")) eta = std::atof(next());
         else if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(next());
         else if (!std::strcmp(argv[i], "--keep")) keep = next();
@@ -120,7 +121,8 @@ int main(int argc, char** argv) {
     json doc{{"format", "viscoscope.job"}, {"version", 1}, {"scene", sceneFile.string()}, {"camera", "camera.json"},
              {"silhouettes", "reference"},
              {"parameters", {{{"name", "viscosity"}, {"initial", 30.0}, {"spread", 30.0}, {"min", 1e-2}, {"max", 1e3}}}},
-             {"resolution", resolution}, {"max_generations", generations}, {"tolerance_x", 0.01}, {"seed", 1}};
+             {"resolution", resolution}, {"max_generations", generations}, {"tolerance_x", 0.01}, {"seed", 1},
+             {"fidelity", {{"coarse_generations", coarseGenerations}}}};
     std::printf("identification: %d³ (coarse %d³), %d frames, ≤ %d generations, threads %s\n", resolution,
                 std::max(8, int(std::lround(0.66 * resolution))), frames, generations,
                 threads ? std::to_string(threads).c_str() : "all");

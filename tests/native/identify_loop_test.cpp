@@ -197,9 +197,9 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
                 "%d generations, %ld evaluations, stop %s, %.1f s wall\n",
                 result.theta[0], kEtaTrue, 100 * error, result.interval[0][0], result.interval[0][1],
                 result.intervalMethod.c_str(), result.generations, result.evaluations, identify::toString(result.stop), wall);
-    const json& fit = result.document.at("viscosity").at("profile_fit");
-    if (fit.contains("x_min"))
-        std::printf("[ identify ] parabola vertex of E(ln eta) at eta = %.4f\n", std::exp(fit.at("x_min").get<double>()));
+    const json& viscosity = result.document.at("viscosity");
+    std::printf("[ identify ] estimate: %s; best evaluation eta = %.4f\n",
+                viscosity.at("estimate").get<std::string>().c_str(), viscosity.at("best_evaluation").get<double>());
     EXPECT_LT(error, 0.10);
     EXPECT_LE(result.interval[0][0], result.theta[0]);
     EXPECT_GE(result.interval[0][1], result.theta[0]);
@@ -209,6 +209,34 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     const identify::IdentificationResult again = identify::identify(j, dir_ / "out", options);
     EXPECT_EQ(again.theta, result.theta);
     EXPECT_EQ(again.evaluations, result.evaluations);
+}
+
+// A budget far below what the job needs: the coarse phase ends after its first generation, the
+// minimum three full-resolution generations run, and then the loop stops instead of starting
+// another. A rerun with the same budget evaluates nothing more; without a budget it goes on.
+TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
+    json doc = jobJson();
+    doc["max_generations"] = 40;
+    doc["time_budget_s"] = 0.5;
+    identify::IdentifyOptions options;
+    options.writeFields = false;
+    const fs::path out = dir_ / "budget_out";
+    const identify::IdentificationResult result = identify::identify(job(doc), out, options);
+    std::printf("[ identify ] budget 0.5 s: stop %s after %d generations (%d coarse), %.1f s\n",
+                identify::toString(result.stop), result.generations,
+                result.document.at("coarse_generations").get<int>(), result.seconds);
+    EXPECT_EQ(result.stop, identify::StopReason::TimeBudget);
+    EXPECT_EQ(result.document.at("coarse_generations").get<int>(), 1);
+    EXPECT_EQ(result.generations, 1 + 3);
+    const identify::IdentificationResult again = identify::identify(job(doc), out, options);
+    EXPECT_EQ(again.evaluations, result.evaluations);
+    EXPECT_EQ(again.stop, identify::StopReason::TimeBudget);
+    doc["time_budget_s"] = 0;
+    doc["max_generations"] = 5;
+    const identify::IdentificationResult more = identify::identify(job(doc), out, options);
+    EXPECT_EQ(more.generations, 5);
+    EXPECT_EQ(more.stop, identify::StopReason::MaxGenerations);
+    fs::remove_all(out);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -271,10 +299,9 @@ TEST_F(IdentifyLoop, RecoversViscosityFromABlenderRenderedReference) {
                 result.intervalMethod.c_str(), result.E, result.evaluations, timings.at("total_s").get<double>(),
                 timings.at("simulate_s").get<double>(), timings.at("render_s").get<double>(),
                 timings.at("encode_s").get<double>(), wall);
-    const json& fit = result.document.at("viscosity").at("profile_fit");
-    if (fit.contains("x_min"))
-        std::printf("[ identify ] Blender-rendered reference: parabola vertex of E(ln eta) at eta = %.4f\n",
-                    std::exp(fit.at("x_min").get<double>()));
+    const json& viscosity = result.document.at("viscosity");
+    std::printf("[ identify ] Blender-rendered reference: estimate %s; best evaluation eta = %.4f\n",
+                viscosity.at("estimate").get<std::string>().c_str(), viscosity.at("best_evaluation").get<double>());
     EXPECT_LT(error, 0.10);
 }
 

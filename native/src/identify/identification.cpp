@@ -6,11 +6,19 @@
 //     G_c = fidelity.coarse_generations, by default min(⌊max_generations / 2⌋, 10), and always
 //     ≤ max_generations − 1 so at least one generation runs at the job's resolution r;
 //   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
-//     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted);
+//     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted),
+//     or, with a time budget, once another coarse generation and min_fine_generations full-
+//     resolution ones would not fit in it;
 //   * at the switch the CMA-ES state is kept, σ is raised so that the largest σ√C_ii is at least
-//     0.1 (≈ 10 % in θ, the size of the coarse-to-fine shift we measured), and the best-so-far is
-//     reset: E values of different resolutions are not comparable;
+//     kCoarseToFineShift, and the best-so-far is reset: E values of different resolutions are not
+//     comparable;
 //   * tolerances are checked only at full resolution, after fidelity.min_fine_generations there.
+//
+// θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-resolution
+// evaluations near the best one, when the fit is convex and the vertex lies among the fitted points; otherwise the
+// best full-resolution evaluation. E(θ) carries a jitter of its own (a drop that pinches off one
+// frame earlier), of ~10 % of E between neighbouring η, so the best of a dozen samples lands
+// anywhere in the flat bottom; the fit averages the jitter out.
 #include "identify/identify.h"
 
 #include "sim/sim.h"
@@ -37,6 +45,7 @@ const char* toString(StopReason reason) {
         case StopReason::MaxGenerations: return "max_generations";
         case StopReason::ToleranceX: return "tolerance_x";
         case StopReason::ToleranceFun: return "tolerance_fun";
+        case StopReason::TimeBudget: return "time_budget";
         case StopReason::Cancelled: return "cancelled";
     }
     return "?";
@@ -61,7 +70,7 @@ std::string fingerprint(const Job& job) {
     // FNV-1a over the job document and the resolved inputs that change E.
     // Settings that change neither E nor the CMA-ES state may differ between runs of one job.
     json doc = job.document;
-    for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun"}) doc.erase(key);
+    for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun", "time_budget_s"}) doc.erase(key);
     doc["_scene"] = sceneToJson(job.scene);
     doc["_camera"] = cameraToJson(job.camera);
     doc["_reference"] = job.referenceDir.string();
@@ -75,6 +84,12 @@ std::string fingerprint(const Job& job) {
 }
 
 double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo, x)); }
+
+// The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
+// drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
+// 3–4 cells wide, and the 32³ optimum sits 25–50 % above the fine one (tests/bench/identify_bench).
+// So the fine phase starts with a log-space spread of at least ln 1.4.
+constexpr double kCoarseToFineShift = 0.35;
 
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
@@ -103,22 +118,39 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
                          " image or lie behind the camera)");
 }
 
-// E ≈ a + b u + c u², u = x − x_best, least squares over full-resolution evaluations of one
-// parameter; the interval is where the parabola stays within ΔE of its minimum, ΔE = 2 × the RMS
-// residual of the fit (the simulation noise in E), at least 1 % of E_min.
-std::optional<std::array<double, 2>> profileInterval(const std::vector<std::pair<double, double>>& points,
-                                                     double xBest, double range, json& info) {
+// The profile of E around the best full-resolution evaluation θ_b of a single parameter: a
+// least-squares parabola E ≈ a + b u + c u² over the evaluations with |ln θ − ln θ_b| ≤ `range`.
+// For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
+// the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
+// its valley is steeper below the truth than above, and a parabola there puts the vertex high
+// (measured: +2 % and +10 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
+// parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
+// 2 × the RMS residual of the fit (the jitter in E), at least 1 % of E_min.
+struct ProfileFit {
+    double vertex = 0;                   // θ at the parabola's minimum
+    std::array<double, 2> interval{};    // θ
+    bool vertexAmongPoints = false;      // within the span of the fitted points (no extrapolation)
+};
+
+std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
+                                     double range, bool inverse, json& info) {
+    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    const auto theta = [&](double value) { return inverse ? 1 / value : std::exp(value); };
     std::vector<std::pair<double, double>> near;
     for (const auto& p : points)
-        if (std::abs(p.first - xBest) <= range && std::isfinite(p.second)) near.push_back(p);
+        if (std::abs(std::log(p.first / thetaBest)) <= range && std::isfinite(p.second))
+            near.emplace_back(u(p.first) - u(thetaBest), p.second);
     info["points"] = near.size();
+    info["variable"] = inverse ? "1/θ" : "ln θ";
     if (near.size() < 5) return std::nullopt;
     Eigen::MatrixXd A(near.size(), 3);
     Eigen::VectorXd y(near.size());
+    double lowest = INFINITY, highest = -INFINITY;
     for (size_t i = 0; i < near.size(); ++i) {
-        const double u = near[i].first - xBest;
-        A.row(i) << 1, u, u * u;
+        A.row(i) << 1, near[i].first, near[i].first * near[i].first;
         y[i] = near[i].second;
+        lowest = std::min(lowest, near[i].first);
+        highest = std::max(highest, near[i].first);
     }
     const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
     const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
@@ -129,9 +161,18 @@ std::optional<std::array<double, 2>> profileInterval(const std::vector<std::pair
     const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
     const double dE = std::max(2 * rms, 0.01 * std::abs(eMin));
     const double half = std::sqrt(dE / coef[2]);
+    const double uMin = u(thetaBest) + u0;
     info["delta_E"] = dE;
-    info["x_min"] = xBest + u0;
-    return std::array<double, 2>{xBest + u0 - half, xBest + u0 + half};
+    if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
+    ProfileFit fit;
+    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
+    fit.vertex = theta(uMin);
+    const double lo = uMin - half, hi = uMin + half;
+    // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
+    fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
+                           : std::array<double, 2>{theta(lo), theta(hi)};
+    info["theta_min"] = fit.vertex;
+    return fit;
 }
 
 struct FieldsSummary {
@@ -250,10 +291,12 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         elapsedBefore = cp.at("elapsed_s").get<double>();
         if (cp.contains("stop") && !cp.at("stop").is_null()) {
             const std::string s = cp.at("stop").get<std::string>();
-            for (StopReason r : {StopReason::MaxGenerations, StopReason::ToleranceX, StopReason::ToleranceFun})
+            for (StopReason r : {StopReason::MaxGenerations, StopReason::ToleranceX, StopReason::ToleranceFun,
+                                 StopReason::TimeBudget})
                 if (s == toString(r)) stop = r;
-            // A finished run continues when max_generations was raised.
+            // A finished run continues when max_generations or the time budget was raised.
             if (stop == StopReason::MaxGenerations && es.generation() < job.maxGenerations) stop.reset();
+            if (stop == StopReason::TimeBudget) stop.reset();  // decided again below, with this job's budget
         }
         resumedFrom = es.generation();
     } else {
@@ -278,6 +321,19 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     std::vector<double> genSecondsCoarse, genSecondsFine;
     for (const json& g : generations)
         (g.at("resolution") == fineRes ? genSecondsFine : genSecondsCoarse).push_back(g.at("seconds").get<double>());
+    auto mean = [](const std::vector<double>& v) {
+        double s = 0;
+        for (double x : v) s += x;
+        return v.empty() ? 0.0 : s / v.size();
+    };
+    // Predicted seconds of a full-resolution generation: measured ones, else the coarse ones scaled
+    // by (r/r_c)⁴ (cells × time steps; measured 6.4× for 32³ → 48³ against 5.1× predicted).
+    auto fineGenerationSeconds = [&] {
+        return genSecondsFine.empty() ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4)
+                                      : mean(genSecondsFine);
+    };
+    auto elapsedNow = [&] { return elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count(); };
+    auto fitsBudget = [&](double seconds) { return job.timeBudget <= 0 || elapsedNow() + seconds <= job.timeBudget; };
 
     auto checkpoint = [&](const Clock::time_point& now) {
         json cp{{"format", "viscoscope.identify_checkpoint"},
@@ -296,6 +352,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const int g = es.generation();
         if (g >= job.maxGenerations) {
             stop = StopReason::MaxGenerations;
+            checkpoint(Clock::now());
+            break;
+        }
+        if (g - coarseEnd >= job.fidelity.minFineGenerations && !fitsBudget(fineGenerationSeconds())) {
+            stop = StopReason::TimeBudget;
             checkpoint(Clock::now());
             break;
         }
@@ -363,12 +424,15 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
         // Phase switch and stopping rules, decided before the checkpoint so a resume agrees.
         const int done = es.generation();
-        if (coarse && done < coarseEnd && maxStd() < coarseTolerance) coarseEnd = done;
+        if (coarse && done < coarseEnd &&
+            (maxStd() < coarseTolerance ||
+             !fitsBudget(mean(genSecondsCoarse) + job.fidelity.minFineGenerations * fineGenerationSeconds())))
+            coarseEnd = done;
         if (coarse && done == coarseEnd) {
             const double s = maxStd();
-            if (s < 0.1) {
+            if (s < kCoarseToFineShift) {
                 json state = es.toJson();
-                state["sigma"] = es.sigma() * 0.1 / s;
+                state["sigma"] = es.sigma() * kCoarseToFineShift / s;
                 es = CmaEs::fromJson(state);
             }
         }
@@ -401,18 +465,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             report.bestE = best ? best->at("E").get<double>() : NAN;
             report.sigma = es.sigma();
             report.elapsed = elapsedBefore + std::chrono::duration<double>(now - sessionStart).count();
-            auto mean = [](const std::vector<double>& v) {
-                double s = 0;
-                for (double x : v) s += x;
-                return v.empty() ? 0.0 : s / v.size();
-            };
-            const double fineGen = genSecondsFine.empty()
-                                       ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4)
-                                       : mean(genSecondsFine);
             const int coarseLeft = std::max(0, coarseEnd - done);
             report.remaining = stop ? 0.0
                                     : coarseLeft * mean(genSecondsCoarse) +
-                                          (job.maxGenerations - std::max(done, coarseEnd)) * fineGen;
+                                          (job.maxGenerations - std::max(done, coarseEnd)) * fineGenerationSeconds();
+            if (job.timeBudget > 0) report.remaining = std::min(report.remaining, std::max(0.0, job.timeBudget - report.elapsed));
             report.resumed = resumedFrom > 0 && done == resumedFrom + 1;
             options.onGeneration(report);
         }
@@ -434,36 +491,44 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const Eigen::VectorXd sd = es.standardDeviations();
     json params = json::object();
     for (int i = 0; i < n; ++i) {
-        const double xb = std::log(result.theta[i]);
+        const double bestTheta = result.theta[i];
         // The final search distribution: exp(m ± 2σ√C_ii) (a 95 % band of CMA-ES's sampling law in log
         // space, the spread it still considers plausible; not a statistical confidence interval).
         const std::array<double, 2> cma{std::exp(clipped(es.mean()[i] - 2 * sd[i], bounds.lower[i], bounds.upper[i])),
                                         std::exp(clipped(es.mean()[i] + 2 * sd[i], bounds.lower[i], bounds.upper[i]))};
-        json entry{{"value", result.theta[i]},
+        json entry{{"best_evaluation", bestTheta},
                    {"cma_mean", std::exp(es.mean()[i])},
                    {"cma_interval", cma},
                    {"log_std", sd[i]}};
-        std::optional<std::array<double, 2>> profile;
+        std::optional<ProfileFit> profile;
         if (n == 1) {
             std::vector<std::pair<double, double>> points;
             for (const json& e : evaluated)
                 if (e.at("resolution") == fineRes && !e.at("E").is_null())
-                    points.emplace_back(std::log(e.at("theta")[0].get<double>()), e.at("E").get<double>());
+                    points.emplace_back(e.at("theta")[0].get<double>(), e.at("E").get<double>());
             json info;
-            profile = profileInterval(points, xb, 0.5, info);
+            profile = fitProfile(points, bestTheta, 0.5, job.parameters[i].name == "viscosity", info);
             entry["profile_fit"] = info;
-            if (profile) entry["profile_interval"] = {std::exp((*profile)[0]), std::exp((*profile)[1])};
+            if (profile)
+                entry["profile_interval"] = {profile->interval[0],
+                                             std::min(profile->interval[1], std::exp(bounds.upper[i]))};
         }
+        const bool fromVertex = profile && profile->vertexAmongPoints;
+        if (fromVertex) result.theta[i] = profile->vertex;
+        entry["value"] = result.theta[i];
+        entry["estimate"] = fromVertex ? "profile vertex: minimum of the parabola fitted to E (the fitted "
+                                         "points span it)"
+                                       : "best full-resolution evaluation";
         // The reported interval: the profile band when the fit is convex, else the CMA band; always
         // widened to contain θ*.
-        std::array<double, 2> band = profile ? std::array<double, 2>{std::exp((*profile)[0]), std::exp((*profile)[1])}
-                                             : cma;
-        band[0] = std::min(band[0], result.theta[i]);
-        band[1] = std::max(band[1], result.theta[i]);
+        std::array<double, 2> band = profile ? profile->interval : cma;
+        band[0] = std::max(std::min(band[0], result.theta[i]), std::exp(bounds.lower[i]));
+        band[1] = std::min(std::max(band[1], result.theta[i]), std::exp(bounds.upper[i]));
         entry["interval"] = band;
-        entry["interval_method"] = profile ? "profile: parabola fit of E against ln θ over full-resolution "
-                                             "evaluations within ±0.5 of ln θ*, band where it is within "
-                                             "ΔE = max(2·RMS residual, 1 % E_min) of its minimum"
+        entry["interval_method"] = profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
+                                             "over full-resolution evaluations within ±0.5 in ln θ of the best "
+                                             "one, band where it is within ΔE = max(2·RMS residual, 1 % E_min) "
+                                             "of its minimum"
                                            : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
         result.interval.push_back(band);
         if (i == 0) result.intervalMethod = profile ? "profile" : "cma";
@@ -487,7 +552,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"version", 1},
              {"job", job.file.string()},
              {"parameters", params},
-             {"E", result.E},
+             {"E", result.E},  // of the best evaluation; θ* itself may be the profile vertex
              {"stop", toString(result.stop)},
              {"generations", result.generations},
              {"evaluations", result.evaluations},
@@ -497,7 +562,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"coarse_generations", coarseEnd},
              {"fidelity_policy", "generations 1.." + std::to_string(coarseEnd) + " at resolution " +
                                      std::to_string(coarseRes) + ", the rest at " + std::to_string(fineRes) +
-                                     "; θ* is the best full-resolution evaluation"},
+                                     "; θ* is the profile vertex of the full-resolution evaluations, else the best of them"},
              {"resumed_from_generation", resumedFrom},
              {"history", generations},
              {"evaluated", evaluated},

@@ -126,6 +126,11 @@ struct Job {
     int populationSize = 0;  // 0 = CMA-ES default
     double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (≈ 0.1 % in θ)
     double toleranceFun = 1e-9; // ... or when best E over the last 10 fine generations changes < this
+    // Wall seconds for the whole identification (0 = none). The coarse phase ends early so that the
+    // minimum fine generations fit, and no fine generation starts that is predicted to end past it
+    // (from the mean time of the fine generations so far). With a budget the result depends on the
+    // machine's speed.
+    double timeBudget = 0;
     int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
     bool exactSilhouettes = false;  // mesh + fill instead of the fast band splat
     FidelitySchedule fidelity;
@@ -203,14 +208,14 @@ struct GenerationReport {
     bool resumed = false;
 };
 
-enum class StopReason { MaxGenerations, ToleranceX, ToleranceFun, Cancelled };
+enum class StopReason { MaxGenerations, ToleranceX, ToleranceFun, TimeBudget, Cancelled };
 const char* toString(StopReason reason);
 
 struct IdentificationResult {
     std::vector<double> theta;
     std::vector<std::array<double, 2>> interval;
     std::string intervalMethod;
-    double E = 0;
+    double E = 0;  // of the best evaluation (θ* may be the profile vertex, not itself evaluated)
     StopReason stop = StopReason::MaxGenerations;
     int generations = 0;
     long evaluations = 0;

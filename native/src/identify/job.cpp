@@ -170,6 +170,8 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     job.toleranceX = optionalNumber(doc, "tolerance_x", job.toleranceX, origin);
     job.toleranceFun = optionalNumber(doc, "tolerance_fun", job.toleranceFun, origin);
     if (job.toleranceX < 0 || job.toleranceFun < 0) throw InputError(origin + ": tolerance_x/tolerance_fun: must be ≥ 0");
+    job.timeBudget = optionalNumber(doc, "time_budget_s", 0.0, origin);
+    if (job.timeBudget < 0) throw InputError(origin + ": time_budget_s: must be ≥ 0 (0 = no budget)");
     if (doc.contains("silhouette_method")) {
         const auto method = optionalString(doc, "silhouette_method", origin);
         if (*method != "fast" && *method != "exact")
