@@ -69,6 +69,16 @@ def main(out_dir):
     lo, hi = param["interval"]
     ax.axvspan(lo, hi, color="C2", alpha=0.15, label="interval (%s)" % param["interval_method"].split(":")[0])
     ax.axvline(param["value"], color="C2", label="θ* = %.4g" % param["value"])
+    fit = param.get("profile_fit", {})
+    if "coefficients" in fit and "theta_min" in fit:
+        # The parabola θ* comes from, over the evaluations it was fitted to (within e^±0.5 of the best).
+        a, b, c = fit["coefficients"]
+        inverse = fit.get("variable") == "1/θ"
+        to_u = (lambda t: 1.0 / t) if inverse else math.log
+        best_theta = param["best_evaluation"]
+        thetas = [best_theta * math.exp(-0.5 + i / 100.0) for i in range(101)]
+        curve = [a + b * (to_u(t) - to_u(best_theta)) + c * (to_u(t) - to_u(best_theta)) ** 2 for t in thetas]
+        ax.plot(thetas, curve, "-", color="C2", alpha=0.6, label="parabola in %s" % fit.get("variable", "ln θ"))
     ax.set_xscale("log")
     ax.set_xlabel(unit)
     ax.set_ylabel(r"$E = \sum_f \omega_f E_f$")

@@ -4,12 +4,14 @@
 // (simulation vs silhouettes, per resolution) and the identified η against the truth.
 //
 //   identify_bench [--resolution 24] [--reference-resolution 32] [--frames 30] [--generations 12]
-//                  [--coarse-generations N] [--eta 8] [--threads 0] [--keep DIR] [--no-single]
+//                  [--coarse-generations N] [--time-budget S] [--eta 8] [--threads 0] [--keep DIR]
+//                  [--no-single]
 //
 // The reference is simulated at --reference-resolution with another particle seed, its surface
 // meshed and filled by the exact rasterizer at twice the scoring camera's resolution, then area-
 // downsampled; the identification scores the fast band splat. The goal (≤ 60 frames, 48³,
-// ≤ 10 min on 2 cores) is `--resolution 48 --frames 60`.
+// ≤ 10 min on 2 cores) is `--resolution 48 --reference-resolution 64 --frames 60 --generations 40
+// --time-budget 600 --no-single`.
 #include "identify/identify.h"
 
 #include "sim/sim.h"
@@ -72,9 +74,11 @@ void writeReference(const Scene& base, double eta, int resolution, int frames, c
 
 void printRun(const char* label, const identify::IdentificationResult& r, double truth) {
     const json& t = r.document.at("timings");
+    const double best = r.document.at("viscosity").at("best_evaluation").get<double>();
     std::printf("%-22s eta* = %8.4f Pa·s  error %5.1f %%  interval [%.3f, %.3f] (%s)  E %.5f\n", label, r.theta[0],
                 100 * std::abs(r.theta[0] - truth) / truth, r.interval[0][0], r.interval[0][1],
                 r.intervalMethod.c_str(), r.E);
+    std::printf("%-22s best evaluation %.4f Pa·s (error %.1f %%)\n", "", best, 100 * std::abs(best - truth) / truth);
     std::printf("%-22s %d generations, %ld evaluations, stop %s, wall %.1f s, Σ evaluation time %.1f s\n", "",
                 r.generations, r.evaluations, identify::toString(r.stop), t.at("wall_s").get<double>(),
                 t.at("evaluation_cpu_s").get<double>());
@@ -89,7 +93,7 @@ void printRun(const char* label, const identify::IdentificationResult& r, double
 
 int main(int argc, char** argv) {
     int resolution = 24, referenceResolution = 32, frames = 30, generations = 12, coarseGenerations = -1, threads = 0;
-    double eta = 8;
+    double eta = 8, timeBudget = 0;
     bool single = true;
     fs::path keep;
     for (int i = 1; i < argc; ++i) {
@@ -99,6 +103,7 @@ int main(int argc, char** argv) {
         else if (!std::strcmp(argv[i], "--frames")) frames = std::atoi(next());
         else if (!std::strcmp(argv[i], "--generations")) generations = std::atoi(next());
         else if (!std::strcmp(argv[i], "--coarse-generations")) coarseGenerations = std::atoi(next());
+        else if (!std::strcmp(argv[i], "--time-budget")) timeBudget = std::atof(next());
         else if (!std::strcmp(argv[i], "--eta")) eta = std::atof(next());
         else if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(next());
         else if (!std::strcmp(argv[i], "--keep")) keep = next();
@@ -122,7 +127,7 @@ int main(int argc, char** argv) {
              {"silhouettes", "reference"},
              {"parameters", {{{"name", "viscosity"}, {"initial", 30.0}, {"spread", 30.0}, {"min", 1e-2}, {"max", 1e3}}}},
              {"resolution", resolution}, {"max_generations", generations}, {"tolerance_x", 0.01}, {"seed", 1},
-             {"fidelity", {{"coarse_generations", coarseGenerations}}}};
+             {"fidelity", {{"coarse_generations", coarseGenerations}}}, {"time_budget_s", timeBudget}};
     std::printf("identification: %d³ (coarse %d³), %d frames, ≤ %d generations, threads %s\n", resolution,
                 std::max(8, int(std::lround(0.66 * resolution))), frames, generations,
                 threads ? std::to_string(threads).c_str() : "all");

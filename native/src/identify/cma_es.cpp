@@ -31,16 +31,20 @@ CmaEs::CmaEs(const Eigen::VectorXd& initialMean, const Eigen::VectorXd& initialS
              const CmaEsSettings& settings)
     : n_(static_cast<int>(initialMean.size())), seed_(seed), random_(seed) {
     if (n_ < 1) throw std::invalid_argument("CmaEs: dimension must be ≥ 1");
-    if (initialSpreads.size() != n_ || !(initialSpreads.array() > 0).all() || !initialSpreads.allFinite() ||
-        !initialMean.allFinite())
-        throw std::invalid_argument("CmaEs: initial mean and spreads must be finite, spreads > 0");
     lambda_ = settings.populationSize > 0 ? settings.populationSize
                                           : 4 + static_cast<int>(std::floor(3 * std::log(static_cast<double>(n_))));
     if (lambda_ < 2) throw std::invalid_argument("CmaEs: population size must be ≥ 2");
     setStrategyParameters();
-    mean_ = initialMean;
-    sigma_ = initialSpreads.maxCoeff();
-    C_ = (initialSpreads / sigma_).array().square().matrix().asDiagonal();
+    restart(initialMean, initialSpreads);
+}
+
+void CmaEs::restart(const Eigen::VectorXd& mean, const Eigen::VectorXd& spreads) {
+    if (mean.size() != n_ || spreads.size() != n_ || !(spreads.array() > 0).all() || !spreads.allFinite() ||
+        !mean.allFinite())
+        throw std::invalid_argument("CmaEs: mean and spreads must be finite, of the dimension, spreads > 0");
+    mean_ = mean;
+    sigma_ = spreads.maxCoeff();
+    C_ = (spreads / sigma_).array().square().matrix().asDiagonal();
     pSigma_ = Eigen::VectorXd::Zero(n_);
     pC_ = Eigen::VectorXd::Zero(n_);
     updateEigenDecomposition();

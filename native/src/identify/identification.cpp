@@ -9,9 +9,12 @@
 //     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted),
 //     or, with a time budget, once another coarse generation and min_fine_generations full-
 //     resolution ones would not fit in it;
-//   * at the switch the CMA-ES state is kept, σ is raised so that the largest σ√C_ii is at least
-//     kCoarseToFineShift, and the best-so-far is reset: E values of different resolutions are not
-//     comparable;
+//   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
+//     kCoarseToFineShift in every coordinate (counters and random stream go on), and the best-so-
+//     far is reset: E values of different resolutions are not comparable. In one dimension with
+//     λ = 4, CMA-ES needs more generations to shrink σ than a 10-minute run has (at 32³ σ went
+//     0.8 → 1.0 → 0.55 in 10 generations), so the coarse phase locates the basin and the fine one
+//     searches it, starting from the coarse best rather than from a mean that lags behind;
 //   * tolerances are checked only at full resolution, after fidelity.min_fine_generations there.
 //
 // θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-resolution
@@ -88,7 +91,7 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 // The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
 // drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
 // 3–4 cells wide, and the 32³ optimum sits 25–50 % above the fine one (tests/bench/identify_bench).
-// So the fine phase starts with a log-space spread of at least ln 1.4.
+// So the fine phase searches a log-space spread of ln 1.4 around the coarse optimum.
 constexpr double kCoarseToFineShift = 0.35;
 
 int coarseResolution(const Job& job) {
@@ -429,12 +432,10 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              !fitsBudget(mean(genSecondsCoarse) + job.fidelity.minFineGenerations * fineGenerationSeconds())))
             coarseEnd = done;
         if (coarse && done == coarseEnd) {
-            const double s = maxStd();
-            if (s < kCoarseToFineShift) {
-                json state = es.toJson();
-                state["sigma"] = es.sigma() * kCoarseToFineShift / s;
-                es = CmaEs::fromJson(state);
-            }
+            Eigen::VectorXd start = es.mean();
+            if (const json* coarseBest = bestAt(coarseRes))
+                for (int i = 0; i < n; ++i) start[i] = std::log(coarseBest->at("theta")[i].get<double>());
+            es.restart(start, Eigen::VectorXd::Constant(n, kCoarseToFineShift));
         }
         const int fineDone = done - coarseEnd;
         if (!coarse && fineDone >= job.fidelity.minFineGenerations) {

@@ -43,6 +43,9 @@ public:
     std::vector<Eigen::VectorXd> ask();
     // Fitness of the candidates returned by the last ask(), in the same order (minimized).
     void tell(const std::vector<Eigen::VectorXd>& candidates, const std::vector<double>& fitness);
+    // Starts the search again at `mean` with per-coordinate spreads (σ and C as in the constructor,
+    // evolution paths zero), keeping the generation and evaluation counters and the random stream.
+    void restart(const Eigen::VectorXd& mean, const Eigen::VectorXd& spreads);
 
     int dimension() const { return n_; }
     int lambda() const { return lambda_; }
@@ -98,10 +101,11 @@ struct ParameterSpec {
 
 struct FidelitySchedule {
     // Generations [0, coarseGenerations) simulate at round(coarseFactor · resolution); the rest at
-    // the job's resolution. The coarse phase ends early when its σ tolerance is met. At the switch
-    // the CMA-ES state is kept (mean, σ, C, paths) and the best-so-far is reset, because E values of
-    // the two fidelities are not comparable. Stopping tolerances apply only at full resolution, and
-    // at least `minFineGenerations` run there.
+    // the job's resolution. The coarse phase ends early when its σ tolerance is met (or the time
+    // budget needs the rest). At the switch CMA-ES restarts at the best coarse θ with a fixed
+    // log-space spread, and the best-so-far is reset, because E values of the two fidelities are
+    // not comparable. Stopping tolerances apply only at full resolution, and at least
+    // `minFineGenerations` run there.
     double coarseFactor = 0.66;
     int coarseGenerations = -1;  // −1 = ⌊maxGenerations / 2⌋ capped at 10; 0 = no coarse phase
     int minFineGenerations = 3;
