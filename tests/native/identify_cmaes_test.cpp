@@ -130,4 +130,31 @@ TEST(CmaEs, OneDimensionalLogViscosity) {
     EXPECT_NEAR(std::exp(es.mean()[0]), 7.0, 1e-3);
 }
 
+// A restart (as at the switch to the fine grid) sets the mean and the spreads and clears the
+// adapted shape, but the generation count goes on, and the search converges from there.
+TEST(CmaEs, RestartKeepsCountersAndConvergesFromTheNewMean) {
+    CmaEs es(Eigen::VectorXd::Constant(2, 3.0), 1.0, 7);
+    for (int g = 0; g < 8; ++g) {
+        auto xs = es.ask();
+        std::vector<double> f;
+        for (auto& x : xs) f.push_back(ellipsoid(x));
+        es.tell(xs, f);
+    }
+    const long evaluations = es.evaluations();
+    es.restart(Eigen::Vector2d(0.5, -0.5), Eigen::Vector2d(0.2, 0.1));
+    EXPECT_EQ(es.generation(), 8);
+    EXPECT_EQ(es.evaluations(), evaluations);
+    EXPECT_EQ(es.mean(), Eigen::Vector2d(0.5, -0.5));
+    EXPECT_DOUBLE_EQ(es.standardDeviations()[0], 0.2);
+    EXPECT_DOUBLE_EQ(es.standardDeviations()[1], 0.1);
+    for (int g = 0; g < 200; ++g) {
+        auto xs = es.ask();
+        std::vector<double> f;
+        for (auto& x : xs) f.push_back(ellipsoid(x));
+        es.tell(xs, f);
+    }
+    EXPECT_LT(es.mean().norm(), 1e-4);
+    EXPECT_THROW(es.restart(Eigen::Vector2d(0, 0), Eigen::Vector2d(0.1, 0)), std::invalid_argument);
+}
+
 }  // namespace
