@@ -7,8 +7,7 @@
 //     ≤ max_generations − 1 so at least one generation runs at the job's resolution r;
 //   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
 //     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted),
-//     or, with a time budget, once another coarse generation and min_fine_generations full-
-//     resolution ones would not fit in it;
+//     or, with a time budget, once another coarse generation would end past kCoarseBudgetShare of it;
 //   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
 //     kCoarseToFineShift in every coordinate (counters and random stream go on), and the best-so-
 //     far is reset: E values of different resolutions are not comparable. In one dimension with
@@ -93,6 +92,11 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 // 3–4 cells wide, and the 32³ optimum sits 25–50 % above the fine one (tests/bench/identify_bench).
 // So the fine phase searches a log-space spread of ln 1.4 around the coarse optimum.
 constexpr double kCoarseToFineShift = 0.35;
+// With a time budget, the coarse phase may use half of it. Reserving the predicted time of three
+// fine generations instead left it a single generation in a 10-minute run of the sample scene
+// (the (r/r_c)⁴ prediction was 190 s per fine generation, 125–139 s were measured), too few
+// to find the basin; a run with 10 coarse and 3 fine generations spent 47 % on the coarse phase.
+constexpr double kCoarseBudgetShare = 0.5;
 
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
@@ -330,7 +334,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         return v.empty() ? 0.0 : s / v.size();
     };
     // Predicted seconds of a full-resolution generation: measured ones, else the coarse ones scaled
-    // by (r/r_c)⁴ (cells × time steps; measured 6.4× for 32³ → 48³ against 5.1× predicted).
+    // by (r/r_c)⁴ (cells × time steps; measured 3.5–6.4× for 32³ → 48³ against 5.1× predicted).
     auto fineGenerationSeconds = [&] {
         return genSecondsFine.empty() ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4)
                                       : mean(genSecondsFine);
@@ -429,7 +433,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const int done = es.generation();
         if (coarse && done < coarseEnd &&
             (maxStd() < coarseTolerance ||
-             !fitsBudget(mean(genSecondsCoarse) + job.fidelity.minFineGenerations * fineGenerationSeconds())))
+             (job.timeBudget > 0 && elapsedNow() + mean(genSecondsCoarse) > kCoarseBudgetShare * job.timeBudget)))
             coarseEnd = done;
         if (coarse && done == coarseEnd) {
             Eigen::VectorXd start = es.mean();
