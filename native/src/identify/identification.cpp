@@ -17,10 +17,14 @@
 //   * tolerances are checked only at full resolution, after fidelity.min_fine_generations there.
 //
 // θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-resolution
-// evaluations near the best one, when the fit is convex and the vertex lies among the fitted points; otherwise the
-// best full-resolution evaluation. E(θ) carries a jitter of its own (a drop that pinches off one
-// frame earlier), of ~10 % of E between neighbouring η, so the best of a dozen samples lands
-// anywhere in the flat bottom; the fit averages the jitter out.
+// evaluations near the best one, when the fit is convex, explains E (R² ≥ kMinProfileRSquared) and
+// its vertex lies among the fitted points; otherwise the best full-resolution evaluation. E(θ)
+// carries a jitter of its own (a drop that pinches off one frame earlier), of ~10 % of E between
+// neighbouring η, so the best of a dozen samples lands anywhere in the flat bottom, and the fit
+// averages the jitter out. But E can also jump (a flow that changes its course above some η), and
+// a parabola across the jump misplaces the minimum: R² was 0.93–0.95 on runs where the vertex beat
+// the best sample (1.9 % against 2.3 %, 2.1 % against 8 %) and 0.85 on one where it did not
+// (17.7 % against 1.9 %, a jump in E from 0.185 to 0.31 between η = 10.2 and 11.6).
 #include "identify/identify.h"
 
 #include "sim/sim.h"
@@ -97,6 +101,7 @@ constexpr double kCoarseToFineShift = 0.35;
 // (the (r/r_c)⁴ prediction was 190 s per fine generation, 125–139 s were measured), too few
 // to find the basin; a run with 10 coarse and 3 fine generations spent 47 % on the coarse phase.
 constexpr double kCoarseBudgetShare = 0.5;
+constexpr double kMinProfileRSquared = 0.9;
 
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
@@ -137,6 +142,7 @@ struct ProfileFit {
     double vertex = 0;                   // θ at the parabola's minimum
     std::array<double, 2> interval{};    // θ
     bool vertexAmongPoints = false;      // within the span of the fitted points (no extrapolation)
+    double rSquared = 0;                 // the share of E's variance over the points the parabola explains
 };
 
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
@@ -161,8 +167,10 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     }
     const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
     const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
+    const double rSquared = 1 - (A * coef - y).squaredNorm() / (y.array() - y.mean()).square().sum();
     info["coefficients"] = {coef[0], coef[1], coef[2]};
     info["rms_residual"] = rms;
+    info["r_squared"] = rSquared;
     if (!(coef[2] > 0)) return std::nullopt;
     const double u0 = -coef[1] / (2 * coef[2]);
     const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
@@ -173,6 +181,7 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
     ProfileFit fit;
     fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
+    fit.rSquared = rSquared;
     fit.vertex = theta(uMin);
     const double lo = uMin - half, hi = uMin + half;
     // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
@@ -518,11 +527,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 entry["profile_interval"] = {profile->interval[0],
                                              std::min(profile->interval[1], std::exp(bounds.upper[i]))};
         }
-        const bool fromVertex = profile && profile->vertexAmongPoints;
+        const bool fromVertex = profile && profile->vertexAmongPoints && profile->rSquared >= kMinProfileRSquared;
         if (fromVertex) result.theta[i] = profile->vertex;
         entry["value"] = result.theta[i];
-        entry["estimate"] = fromVertex ? "profile vertex: minimum of the parabola fitted to E (the fitted "
-                                         "points span it)"
+        entry["estimate"] = fromVertex ? "profile vertex: minimum of the parabola fitted to E (R² ≥ 0.9, the "
+                                         "fitted points span it)"
                                        : "best full-resolution evaluation";
         // The reported interval: the profile band when the fit is convex, else the CMA band; always
         // widened to contain θ*.
