@@ -93,7 +93,8 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 
 // The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
 // drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
-// 3–4 cells wide, and the 32³ optimum sits 25–50 % above the fine one (tests/bench/identify_bench).
+// 3–4 cells wide, and the best 32³ evaluations sat 25–35 % above the truth in identify_bench and
+// identification_table runs at 48³.
 // So the fine phase searches a log-space spread of ln 1.4 around the coarse optimum.
 constexpr double kCoarseToFineShift = 0.35;
 // With a time budget, the coarse phase may use half of it. Reserving the predicted time of three
@@ -135,7 +136,7 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
 // For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
 // the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
 // its valley is steeper below the truth than above, and a parabola there puts the vertex high
-// (measured: +2 % and +10 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
+// (measured: +2.3 % and +10.1 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
 // parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
 // 2 × the RMS residual of the fit (the jitter in E), at least 1 % of E_min.
 struct ProfileFit {
