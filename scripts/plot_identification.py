@@ -23,7 +23,6 @@ def main(out_dir):
     names = list(result["parameters"].keys())
     name = names[0]
     unit = {"viscosity": "η (Pa·s)", "surface_tension": "σ (N/m)"}.get(name, name)
-    fine = result["resolution"]
     coarse_end = result.get("coarse_generations", 0)
 
     # Convergence: E per generation (best so far at that fidelity, and the generation's best) and θ.
@@ -51,20 +50,22 @@ def main(out_dir):
         if 0 < coarse_end < len(history):
             ax.axvspan(0.5, coarse_end + 0.5, color="0.9", zorder=0)
     if 0 < coarse_end:
-        ax_t.text(1, ax_t.get_ylim()[1], " coarse %d³" % result["coarse_resolution"], va="top", fontsize=8)
+        ax_t.text(1, ax_t.get_ylim()[1], " coarse: %d³, frames 0..%d" % (result["coarse_resolution"],
+                                                                         result["coarse_frames"]),
+                  va="top", fontsize=8)
     ax_t.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(os.path.join(out_dir, "convergence.png"), dpi=110)
     plt.close(fig)
 
-    # Landscape: every evaluation E(θ), per resolution, with θ* and its interval.
+    # Landscape: every evaluation E(θ), per fidelity, with θ* and its interval.
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    resolutions = sorted({e["resolution"] for e in evaluated})
-    for i, res in enumerate(resolutions):
-        pts = sorted((e["theta"][0], e["E"]) for e in evaluated if e["resolution"] == res and e["E"] is not None)
+    for i, fidelity in enumerate(("coarse", "full")):
+        runs = [e for e in evaluated if e["fidelity"] == fidelity and e["E"] is not None]
+        pts = sorted((e["theta"][0], e["E"]) for e in runs)
         if pts:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "o", ms=4, alpha=0.75, color="C%d" % i,
-                    label="%d³%s" % (res, " (final)" if res == fine else " (coarse)"))
+                    label="%s: %d³, frames 0..%d" % (fidelity, runs[0]["resolution"], runs[0]["frames"]))
     param = result["parameters"][name]
     lo, hi = param["interval"]
     ax.axvspan(lo, hi, color="C2", alpha=0.15, label="interval (%s)" % param["interval_method"].split(":")[0])

@@ -72,10 +72,19 @@ def one_row(args, eta, work):
     camera = work / "side_camera.json"
     camera.write_text(json.dumps(side_camera(args.width, args.height, args.focal)))
     synth = work / "synth"
-    _, synth_s = run([args.engine, "synth", args.scene, "--camera", camera, "--out", synth,
-                      "--resolution", args.reference_resolution, "--seed", args.reference_seed,
-                      "--viscosity", eta, "--frames", args.frames, "--samples", args.samples,
-                      "--progress", "none"], work / "synth.log")
+    synth_command = [args.engine, "synth", args.scene, "--camera", camera, "--out", synth,
+                     "--resolution", args.reference_resolution, "--seed", args.reference_seed,
+                     "--viscosity", eta, "--frames", args.frames, "--samples", args.samples, "--progress", "none"]
+    # A --keep folder's finished reference is reused when made with the same arguments (whichever
+    # engine binary ran them; its time is then shown as "reused").
+    made_by = work / "synth_command.json"
+    command_text = json.dumps([str(a) for a in synth_command[1:]])
+    if (synth / "reference.mp4").exists() and made_by.exists() and made_by.read_text() == command_text:
+        synth_s = None
+    else:
+        made_by.unlink(missing_ok=True)
+        _, synth_s = run(synth_command, work / "synth.log")
+        made_by.write_text(command_text)
     initial = math.sqrt(args.eta_min * args.eta_max)  # the same start for every η: the geometric middle
     job = {
         "format": "viscoscope.job", "version": 1,
@@ -150,7 +159,7 @@ def main():
             row = one_row(args, eta, root / f"eta_{eta:g}")
             print(f"{row['eta']:8g} {row['eta_star']:9.4g} {percent(row['eps_eta'])} {percent(row['eps_p'])} "
                   f"{percent(row['eps_v'])} {row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
-                  f"{row['synth_s']:8.1f} {row['best_evaluation']:9.4g}  "
+                  f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['best_evaluation']:9.4g}  "
                   f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]  {row['stop']}", flush=True)
     finally:
         if not args.keep:

@@ -4,8 +4,8 @@
 // (simulation vs silhouettes, per resolution) and the identified η against the truth.
 //
 //   identify_bench [--resolution 24] [--reference-resolution 32] [--frames 30] [--generations 12]
-//                  [--coarse-generations N] [--time-budget S] [--eta 8] [--threads 0] [--keep DIR]
-//                  [--no-single]
+//                  [--coarse-generations N] [--coarse-factor 1] [--coarse-time-share 0.333]
+//                  [--time-budget S] [--eta 8] [--threads 0] [--keep DIR] [--no-single]
 //
 // The reference is simulated at --reference-resolution with another particle seed, its surface
 // meshed and filled by the exact rasterizer at twice the scoring camera's resolution, then area-
@@ -82,9 +82,10 @@ void printRun(const char* label, const identify::IdentificationResult& r, double
     std::printf("%-22s %d generations, %ld evaluations, stop %s, wall %.1f s, Σ evaluation time %.1f s\n", "",
                 r.generations, r.evaluations, identify::toString(r.stop), t.at("wall_s").get<double>(),
                 t.at("evaluation_cpu_s").get<double>());
-    for (const auto& [res, v] : t.at("per_resolution").items())
-        std::printf("%-22s   %s³: %d evaluations, %.2f s each (simulation %.0f %%, silhouettes %.0f %%)\n", "",
-                    res.c_str(), v.at("evaluations").get<int>(), v.at("mean_seconds").get<double>(),
+    for (const auto& [fidelity, v] : t.at("per_fidelity").items())
+        std::printf("%-22s   %s (%d³, frames 0..%d): %d evaluations, %.2f s each (simulation %.0f %%, silhouettes "
+                    "%.0f %%)\n", "", fidelity.c_str(), v.at("resolution").get<int>(), v.at("frames").get<int>(),
+                    v.at("evaluations").get<int>(), v.at("mean_seconds").get<double>(),
                     100 * v.at("simulation_s").get<double>() / v.at("seconds").get<double>(),
                     100 * v.at("silhouette_s").get<double>() / v.at("seconds").get<double>());
 }
@@ -94,6 +95,8 @@ void printRun(const char* label, const identify::IdentificationResult& r, double
 int main(int argc, char** argv) {
     int resolution = 24, referenceResolution = 32, frames = 30, generations = 12, coarseGenerations = -1, threads = 0;
     double eta = 8, timeBudget = 0;
+    const identify::FidelitySchedule defaults;
+    double coarseFactor = defaults.coarseFactor, coarseTimeShare = defaults.coarseTimeShare;
     bool single = true;
     fs::path keep;
     for (int i = 1; i < argc; ++i) {
@@ -103,6 +106,8 @@ int main(int argc, char** argv) {
         else if (!std::strcmp(argv[i], "--frames")) frames = std::atoi(next());
         else if (!std::strcmp(argv[i], "--generations")) generations = std::atoi(next());
         else if (!std::strcmp(argv[i], "--coarse-generations")) coarseGenerations = std::atoi(next());
+        else if (!std::strcmp(argv[i], "--coarse-factor")) coarseFactor = std::atof(next());
+        else if (!std::strcmp(argv[i], "--coarse-time-share")) coarseTimeShare = std::atof(next());
         else if (!std::strcmp(argv[i], "--time-budget")) timeBudget = std::atof(next());
         else if (!std::strcmp(argv[i], "--eta")) eta = std::atof(next());
         else if (!std::strcmp(argv[i], "--threads")) threads = std::atoi(next());
@@ -127,16 +132,19 @@ int main(int argc, char** argv) {
              {"silhouettes", "reference"},
              {"parameters", {{{"name", "viscosity"}, {"initial", 30.0}, {"spread", 30.0}, {"min", 1e-2}, {"max", 1e3}}}},
              {"resolution", resolution}, {"max_generations", generations}, {"tolerance_x", 0.01}, {"seed", 1},
-             {"fidelity", {{"coarse_generations", coarseGenerations}}}, {"time_budget_s", timeBudget}};
-    std::printf("identification: %d³ (coarse %d³), %d frames, ≤ %d generations, threads %s\n", resolution,
-                std::max(8, int(std::lround(0.66 * resolution))), frames, generations,
+             {"fidelity", {{"coarse_generations", coarseGenerations}, {"coarse_factor", coarseFactor},
+                           {"coarse_time_share", coarseTimeShare}}},
+             {"time_budget_s", timeBudget}};
+    std::printf("identification: %d³ (coarse %d³ over %.0f %% of the clip), %d frames, ≤ %d generations, threads %s\n",
+                resolution, std::max(8, int(std::lround(coarseFactor * resolution))), 100 * coarseTimeShare, frames,
+                generations,
                 threads ? std::to_string(threads).c_str() : "all");
     identify::IdentifyOptions options;
     options.threads = threads;
     options.writeFields = false;
     options.onGeneration = [](const identify::GenerationReport& r) {
-        std::printf("  gen %2d res %2d evals %3ld best eta %8.4f E %.5f sigma %.3f elapsed %6.1f s left %6.1f s\n",
-                    r.generation, r.resolution, r.evaluations, r.bestTheta.empty() ? NAN : r.bestTheta[0], r.bestE,
+        std::printf("  gen %2d %-6s res %2d evals %3ld best eta %8.4f E %.5f sigma %.3f elapsed %6.1f s left %6.1f s\n",
+                    r.generation, r.coarse ? "coarse" : "full", r.resolution, r.evaluations, r.bestTheta.empty() ? NAN : r.bestTheta[0], r.bestE,
                     r.sigma, r.elapsed, r.remaining);
         std::fflush(stdout);
     };

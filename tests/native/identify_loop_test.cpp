@@ -111,7 +111,7 @@ protected:
                 {"camera", "camera.json"},
                 {"silhouettes", "reference"},
                 {"parameters", {{{"name", "viscosity"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 1e-2}, {"max", 1e3}}}},
-                {"resolution", 20},  // coarse phase at 13³; at 16³ the E minimum sits ~9 % above the truth
+                {"resolution", 20},  // at 16³ the E minimum sat ~9 % above the truth
                 {"max_generations", 12},
                 {"tolerance_x", 0.01},
                 {"seed", 3}};
@@ -201,6 +201,15 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     std::printf("[ identify ] estimate: %s; best evaluation eta = %.4f\n",
                 viscosity.at("estimate").get<std::string>().c_str(), viscosity.at("best_evaluation").get<double>());
     EXPECT_LT(error, 0.10);
+    // The coarse generations simulate the job's grid over the first third of the clip only.
+    int coarse = 0;
+    for (const json& e : result.document.at("evaluated")) {
+        const bool isCoarse = e.at("fidelity") == "coarse";
+        coarse += isCoarse;
+        EXPECT_EQ(e.at("resolution").get<int>(), 20);
+        EXPECT_EQ(e.at("frames").get<int>(), isCoarse ? 2 : 10);
+    }
+    EXPECT_GT(coarse, 0);
     EXPECT_LE(result.interval[0][0], result.theta[0]);
     EXPECT_GE(result.interval[0][1], result.theta[0]);
     EXPECT_TRUE(fs::exists(dir_ / "out" / "result.json"));
@@ -212,7 +221,7 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
 }
 
 // A budget far below what the job needs: the coarse phase ends after its first generation, the
-// minimum three full-resolution generations run, and then the loop stops instead of starting
+// minimum three full-fidelity generations run, and then the loop stops instead of starting
 // another. A rerun with the same budget evaluates nothing more; without a budget it goes on.
 TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     json doc = jobJson();

@@ -47,6 +47,7 @@ int runIdentify(const IdentifyArguments& args) {
     options.onGeneration = [&](const identify::GenerationReport& r) {
         nlohmann::json event{{"event", "progress"},      {"stage", "identify"},         {"generation", r.generation},
                              {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},
+                             {"fidelity", r.coarse ? "coarse" : "full"},
                              {"sigma", r.sigma},         {"elapsed", r.elapsed},         {"eta", r.remaining}};
         if (!r.bestTheta.empty()) {
             nlohmann::json theta = nlohmann::json::object();

@@ -99,6 +99,23 @@ Observation loadObservation(const Job& job) {
     return obs;
 }
 
+Observation firstPartOf(const Observation& observation, double share) {
+    Observation part = observation;
+    int first = -1, last = -1;
+    for (int f : observation.simFrames)
+        if (f >= 0) {
+            first = first < 0 ? f : std::min(first, f);
+            last = std::max(last, f);
+        }
+    const double end = std::max<double>(first, share * last);
+    for (size_t i = 0; i < part.simFrames.size(); ++i)
+        if (part.simFrames[i] > end + 1e-9) {
+            part.simFrames[i] = -1;
+            part.masks[i] = cv::Mat1b();
+        }
+    return part;
+}
+
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution) {
     Scene scene = job.scene;
     for (size_t i = 0; i < job.parameters.size(); ++i) {

@@ -2,23 +2,31 @@
 // (TBB), two fidelities, a checkpoint after every generation, resume, stopping rules and results.
 //
 // Fidelity policy (measured in tests/bench/identify_bench.cpp):
-//   * generations [0, G_c) run at the coarse resolution r_c = max(8, round(coarse_factor · r)),
-//     G_c = fidelity.coarse_generations, by default min(⌊max_generations / 2⌋, 10), and always
-//     ≤ max_generations − 1 so at least one generation runs at the job's resolution r;
+//   * generations [0, G_c) simulate on the grid r_c = max(8, round(coarse_factor · r)) and only the
+//     first coarse_time_share of the compared clip, G_c = fidelity.coarse_generations, by default
+//     min(⌊max_generations / 2⌋, 10), and always ≤ max_generations − 1 so at least one generation
+//     runs at full fidelity (the job's resolution r, every compared frame);
+//   * by default the coarse phase keeps the job's grid and shortens the clip to its first third.
+//     A coarser grid is biased: on the sample scene the cup drains 1.5× too fast at 32³ (see
+//     kCoarseToFineShift), so its optimum sat 25–35 % above the truth, while the first 20 of 60
+//     frames at 48³ put the minimum at the truth (E 0.031 at 9 and 0.032 at 10 Pa·s, truth 10) for
+//     about the cost of all 60 frames at 32³ (17 s against 14 s per evaluation, two at once);
 //   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
-//     (the coarse grid's bias on η is larger than that, so more coarse generations are wasted),
-//     or, with a time budget, once another coarse generation would end past kCoarseBudgetShare of it;
+//     (the coarse optimum differs from the full-fidelity one by more than that, so more coarse
+//     generations are wasted),
+//     or, with a time budget, once another coarse generation would end past kCoarseBudgetShare of it
+//     or past the time the minimum full-fidelity generations are predicted to need;
 //   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
 //     kCoarseToFineShift in every coordinate (counters and random stream go on), and the best-so-
-//     far is reset: E values of different resolutions are not comparable. In one dimension with
+//     far is reset: E values of different fidelities are not comparable. In one dimension with
 //     λ = 4, CMA-ES needs more generations to shrink σ than a 10-minute run has (at 32³ σ went
 //     0.8 → 1.0 → 0.55 in 10 generations), so the coarse phase locates the basin and the fine one
 //     searches it, starting from the coarse best rather than from a mean that lags behind;
-//   * tolerances are checked only at full resolution, after fidelity.min_fine_generations there.
+//   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there.
 //
-// θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-resolution
+// θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-fidelity
 // evaluations near the best one, when the fit is convex, explains E (R² ≥ kMinProfileRSquared) and
-// its vertex lies among the fitted points; otherwise the best full-resolution evaluation. E(θ)
+// its vertex lies among the fitted points; otherwise the best full-fidelity evaluation. E(θ)
 // carries a jitter of its own (a drop that pinches off one frame earlier), of ~10 % of E between
 // neighbouring η, so the best of a dozen samples lands anywhere in the flat bottom, and the fit
 // averages the jitter out. But E can also jump (a flow that changes its course above some η), and
@@ -97,19 +105,30 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 // identification_table runs at 48³.
 // So the fine phase searches a log-space spread of ln 1.4 around the coarse optimum.
 constexpr double kCoarseToFineShift = 0.35;
-// With a time budget, the coarse phase may use half of it. Reserving the predicted time of three
-// fine generations instead left it a single generation in a 10-minute run of the sample scene
-// (the (r/r_c)⁴ prediction was 190 s per fine generation, 125–139 s were measured), too few
-// to find the basin; a run with 10 coarse and 3 fine generations spent 47 % on the coarse phase.
+// With a time budget, the coarse phase may use at most half of it, and no more than leaves time for
+// the minimum full-fidelity generations. When the coarse grid was 32³, their (r/r_c)⁴ prediction
+// was 190 s per generation where 125–139 s were measured, and the reservation alone left the coarse
+// phase a single generation in a 10-minute run; hence the cap. On the same grid over a third of the
+// clip, the prediction is low instead (110 s predicted, 135 s measured on the sample scene at 48³:
+// later frames cost more, with more liquid outside the cup), hence the margin.
 constexpr double kCoarseBudgetShare = 0.5;
+constexpr double kFineTimeMargin = 1.25;
 constexpr double kMinProfileRSquared = 0.9;
+// Version 2 tags every evaluation with its fidelity (version 1 told them apart by resolution).
+constexpr int kCheckpointVersion = 2;
+constexpr const char* kCoarse = "coarse";
+constexpr const char* kFull = "full";
 
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
 }
 
-int plannedCoarseGenerations(const Job& job) {
-    if (coarseResolution(job) >= job.resolution) return 0;
+int lastSimFrame(const Observation& obs) {
+    return *std::max_element(obs.simFrames.begin(), obs.simFrames.end());
+}
+
+int plannedCoarseGenerations(const Job& job, const Observation& obs, const Observation& coarseObs) {
+    if (coarseResolution(job) >= job.resolution && lastSimFrame(coarseObs) >= lastSimFrame(obs)) return 0;
     int g = job.fidelity.coarseGenerations >= 0 ? job.fidelity.coarseGenerations
                                                 : std::min(job.maxGenerations / 2, 10);
     return std::max(0, std::min(g, job.maxGenerations - 1));
@@ -131,7 +150,7 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
                          " image or lie behind the camera)");
 }
 
-// The profile of E around the best full-resolution evaluation θ_b of a single parameter: a
+// The profile of E around the best full-fidelity evaluation θ_b of a single parameter: a
 // least-squares parabola E ≈ a + b u + c u² over the evaluations with |ln θ − ln θ_b| ≤ `range`.
 // For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
 // the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
@@ -277,6 +296,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
+    const Observation coarseObs = firstPartOf(obs, job.fidelity.coarseTimeShare);
+    const int fineFrames = lastSimFrame(obs), coarseFrames = lastSimFrame(coarseObs);
     const double coarseTolerance = 0.02 + 10 * job.toleranceX;
     const std::string print = fingerprint(job);
     const fs::path checkpointFile = outDir / "checkpoint.json";
@@ -284,7 +305,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     CmaEsSettings settings;
     settings.populationSize = job.populationSize;
     CmaEs es(bounds.start, bounds.spread, job.seed, settings);
-    int coarseEnd = plannedCoarseGenerations(job);
+    int coarseEnd = plannedCoarseGenerations(job, obs, coarseObs);
     json evaluated = json::array(), generations = json::array();
     double elapsedBefore = 0;
     std::optional<StopReason> stop;
@@ -298,6 +319,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             throw InputError(checkpointFile.string() + ": unreadable checkpoint (" + e.what() +
                              "); delete it or use another --out");
         }
+        if (cp.value("version", 0) != kCheckpointVersion)
+            throw InputError(checkpointFile.string() + ": checkpoint of an older Viscoscope (version " +
+                             std::to_string(cp.value("version", 0)) + "); delete it or use another --out");
         if (cp.value("fingerprint", "") != print)
             throw InputError(checkpointFile.string() + ": checkpoint of a different job (or changed scene, camera, "
                                                        "reference); use another --out or delete it");
@@ -325,11 +349,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         threadLimit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(options.threads));
     tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
 
-    // Best at a resolution over the recorded evaluations.
-    auto bestAt = [&](int resolution) -> const json* {
+    // Best at a fidelity over the recorded evaluations.
+    auto bestAt = [&](const char* fidelity) -> const json* {
         const json* best = nullptr;
         for (const json& e : evaluated)
-            if (e.at("resolution") == resolution && !e.at("E").is_null() &&
+            if (e.at("fidelity") == fidelity && !e.at("E").is_null() &&
                 (!best || e.at("E").get<double>() < best->at("E").get<double>()))
                 best = &e;
         return best;
@@ -337,16 +361,18 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     auto maxStd = [&] { return es.standardDeviations().maxCoeff(); };
     std::vector<double> genSecondsCoarse, genSecondsFine;
     for (const json& g : generations)
-        (g.at("resolution") == fineRes ? genSecondsFine : genSecondsCoarse).push_back(g.at("seconds").get<double>());
+        (g.at("fidelity") == kFull ? genSecondsFine : genSecondsCoarse).push_back(g.at("seconds").get<double>());
     auto mean = [](const std::vector<double>& v) {
         double s = 0;
         for (double x : v) s += x;
         return v.empty() ? 0.0 : s / v.size();
     };
-    // Predicted seconds of a full-resolution generation: measured ones, else the coarse ones scaled
-    // by (r/r_c)⁴ (cells × time steps; measured 3.5–6.4× for 32³ → 48³ against 5.1× predicted).
+    // Predicted seconds of a full-fidelity generation: measured ones, else the coarse ones scaled
+    // by (r/r_c)⁴ (cells × time steps; measured 3.5–6.4× for 32³ → 48³ against 5.1× predicted) and
+    // by the simulated time.
     auto fineGenerationSeconds = [&] {
-        return genSecondsFine.empty() ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4)
+        return genSecondsFine.empty() ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4) *
+                                            (fineFrames + 1.0) / (coarseFrames + 1.0)
                                       : mean(genSecondsFine);
     };
     auto elapsedNow = [&] { return elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count(); };
@@ -354,7 +380,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
     auto checkpoint = [&](const Clock::time_point& now) {
         json cp{{"format", "viscoscope.identify_checkpoint"},
-                {"version", 1},
+                {"version", kCheckpointVersion},
                 {"fingerprint", print},
                 {"cma", es.toJson()},
                 {"coarse_end", coarseEnd},
@@ -379,6 +405,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         }
         const bool coarse = g < coarseEnd;
         const int resolution = coarse ? coarseRes : fineRes;
+        const char* fidelity = coarse ? kCoarse : kFull;
         const auto genStart = Clock::now();
         const std::vector<Eigen::VectorXd> xs = es.ask();
         std::vector<Evaluation> evals(xs.size());
@@ -386,7 +413,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         arena.execute([&] {
             tbb::parallel_for(0, static_cast<int>(xs.size()), 1, [&](int k) {
                 try {
-                    evals[k] = evaluate(job, obs, thetaOf(xs[k], bounds), resolution);
+                    evals[k] = evaluate(job, coarse ? coarseObs : obs, thetaOf(xs[k], bounds), resolution);
                 } catch (const InputError&) {
                     throw;
                 } catch (const std::exception& e) {  // an unstable simulation ranks last, never aborts the run
@@ -410,7 +437,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             fitness[k] = std::isfinite(evals[k].E) ? evals[k].E + boundPenalty(xs[k], bounds) : 1e30;
             if (fitness[k] < fitness[bestK]) bestK = static_cast<int>(k);
             json e{{"generation", g + 1},
+                   {"fidelity", fidelity},
                    {"resolution", resolution},
+                   {"frames", coarse ? coarseFrames : fineFrames},
                    {"theta", vec(evals[k].theta)},
                    {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
                    {"E", std::isfinite(evals[k].E) ? json(evals[k].E) : json()},
@@ -424,10 +453,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         es.tell(xs, fitness);
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         (coarse ? genSecondsCoarse : genSecondsFine).push_back(genSeconds);
-        const json* best = bestAt(resolution);
+        const json* best = bestAt(fidelity);
         std::vector<double> meanTheta = thetaOf(es.mean(), bounds);
         const Eigen::VectorXd sd = es.standardDeviations();
         generations.push_back({{"generation", g + 1},
+                               {"fidelity", fidelity},
                                {"resolution", resolution},
                                {"generation_best_E", std::isfinite(evals[bestK].E) ? json(evals[bestK].E) : json()},
                                {"generation_best_theta", vec(evals[bestK].theta)},
@@ -443,11 +473,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const int done = es.generation();
         if (coarse && done < coarseEnd &&
             (maxStd() < coarseTolerance ||
-             (job.timeBudget > 0 && elapsedNow() + mean(genSecondsCoarse) > kCoarseBudgetShare * job.timeBudget)))
+             (job.timeBudget > 0 &&
+              elapsedNow() + mean(genSecondsCoarse) >
+                  std::min(kCoarseBudgetShare * job.timeBudget,
+                           job.timeBudget - job.fidelity.minFineGenerations * kFineTimeMargin * fineGenerationSeconds()))))
             coarseEnd = done;
         if (coarse && done == coarseEnd) {
             Eigen::VectorXd start = es.mean();
-            if (const json* coarseBest = bestAt(coarseRes))
+            if (const json* coarseBest = bestAt(kCoarse))
                 for (int i = 0; i < n; ++i) start[i] = std::log(coarseBest->at("theta")[i].get<double>());
             es.restart(start, Eigen::VectorXd::Constant(n, kCoarseToFineShift));
         }
@@ -476,6 +509,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             report.generations = job.maxGenerations;
             report.evaluations = es.evaluations();
             report.resolution = resolution;
+            report.coarse = coarse;
             if (best) report.bestTheta = best->at("theta").get<std::vector<double>>();
             report.bestE = best ? best->at("E").get<double>() : NAN;
             report.sigma = es.sigma();
@@ -498,8 +532,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     result.generations = es.generation();
     result.evaluations = es.evaluations();
     result.resumedFromGeneration = resumedFrom;
-    const json* best = bestAt(fineRes);
-    if (!best) best = bestAt(coarseRes);
+    const json* best = bestAt(kFull);
+    if (!best) best = bestAt(kCoarse);
     if (!best) throw std::runtime_error("no successful evaluation");
     result.theta = best->at("theta").get<std::vector<double>>();
     result.E = best->at("E").get<double>();
@@ -519,7 +553,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         if (n == 1) {
             std::vector<std::pair<double, double>> points;
             for (const json& e : evaluated)
-                if (e.at("resolution") == fineRes && !e.at("E").is_null())
+                if (e.at("fidelity") == kFull && !e.at("E").is_null())
                     points.emplace_back(e.at("theta")[0].get<double>(), e.at("E").get<double>());
             json info;
             profile = fitProfile(points, bestTheta, 0.5, job.parameters[i].name == "viscosity", info);
@@ -533,7 +567,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         entry["value"] = result.theta[i];
         entry["estimate"] = fromVertex ? "profile vertex: minimum of the parabola fitted to E (R² ≥ 0.9, the "
                                          "fitted points span it)"
-                                       : "best full-resolution evaluation";
+                                       : "best full-fidelity evaluation";
         // The reported interval: the profile band when the fit is convex, else the CMA band; always
         // widened to contain θ*.
         std::array<double, 2> band = profile ? profile->interval : cma;
@@ -541,7 +575,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         band[1] = std::min(std::max(band[1], result.theta[i]), std::exp(bounds.upper[i]));
         entry["interval"] = band;
         entry["interval_method"] = profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
-                                             "over full-resolution evaluations within ±0.5 in ln θ of the best "
+                                             "over full-fidelity evaluations within ±0.5 in ln θ of the best "
                                              "one, band where it is within ΔE = max(2·RMS residual, 1 % E_min) "
                                              "of its minimum"
                                            : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
@@ -551,17 +585,19 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     }
     const double elapsed = elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count();
     double evalSeconds = 0;
-    json perResolution = json::object();
+    json perFidelity = json::object();
     for (const json& e : evaluated) {
         evalSeconds += e.at("seconds").get<double>();
-        json& r = perResolution[std::to_string(e.at("resolution").get<int>())];
-        if (r.is_null()) r = {{"evaluations", 0}, {"seconds", 0.0}, {"simulation_s", 0.0}, {"silhouette_s", 0.0}};
+        json& r = perFidelity[e.at("fidelity").get<std::string>()];
+        if (r.is_null())
+            r = {{"resolution", e.at("resolution")}, {"frames", e.at("frames")}, {"evaluations", 0}, {"seconds", 0.0},
+                 {"simulation_s", 0.0}, {"silhouette_s", 0.0}};
         r["evaluations"] = r.value("evaluations", 0) + 1;
         r["simulation_s"] = r["simulation_s"].get<double>() + e.value("simulation_s", 0.0);
         r["silhouette_s"] = r["silhouette_s"].get<double>() + e.value("silhouette_s", 0.0);
         r["seconds"] = r.value("seconds", 0.0) + e.at("seconds").get<double>();
     }
-    for (auto& [key, r] : perResolution.items()) r["mean_seconds"] = r["seconds"].get<double>() / r["evaluations"].get<int>();
+    for (auto& [key, r] : perFidelity.items()) r["mean_seconds"] = r["seconds"].get<double>() / r["evaluations"].get<int>();
 
     json doc{{"format", "viscoscope.identify_result"},
              {"version", 1},
@@ -573,15 +609,19 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"evaluations", result.evaluations},
              {"population", es.lambda()},
              {"resolution", fineRes},
+             {"frames", fineFrames},
              {"coarse_resolution", coarseRes},
+             {"coarse_frames", coarseFrames},
              {"coarse_generations", coarseEnd},
              {"fidelity_policy", "generations 1.." + std::to_string(coarseEnd) + " at resolution " +
-                                     std::to_string(coarseRes) + ", the rest at " + std::to_string(fineRes) +
-                                     "; θ* is the profile vertex of the full-resolution evaluations, else the best of them"},
+                                     std::to_string(coarseRes) + " over simulation frames 0.." +
+                                     std::to_string(coarseFrames) + ", the rest at " + std::to_string(fineRes) +
+                                     " over 0.." + std::to_string(fineFrames) +
+                                     "; θ* is the profile vertex of the full-fidelity evaluations, else the best of them"},
              {"resumed_from_generation", resumedFrom},
              {"history", generations},
              {"evaluated", evaluated},
-             {"timings", {{"wall_s", elapsed}, {"evaluation_cpu_s", evalSeconds}, {"per_resolution", perResolution}}}};
+             {"timings", {{"wall_s", elapsed}, {"evaluation_cpu_s", evalSeconds}, {"per_fidelity", perFidelity}}}};
     if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
     if (options.writeFields) {
         const auto fieldsStart = Clock::now();
@@ -594,12 +634,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // Every evaluation as CSV for plotting.
     {
         std::ofstream csv(outDir / "evaluations.csv.partial");
-        csv << "generation,resolution";
+        csv << "generation,fidelity,resolution,frames";
         for (const ParameterSpec& p : job.parameters) csv << "," << p.name;
         csv << ",E,seconds\n";
         csv << std::setprecision(17);
         for (const json& e : evaluated) {
-            csv << e.at("generation").get<int>() << "," << e.at("resolution").get<int>();
+            csv << e.at("generation").get<int>() << "," << e.at("fidelity").get<std::string>() << ","
+                << e.at("resolution").get<int>() << "," << e.at("frames").get<int>();
             for (const json& t : e.at("theta")) csv << "," << t.get<double>();
             csv << ",";
             if (e.at("E").is_null()) csv << "nan";

@@ -100,13 +100,14 @@ struct ParameterSpec {
 };
 
 struct FidelitySchedule {
-    // Generations [0, coarseGenerations) simulate at round(coarseFactor · resolution); the rest at
-    // the job's resolution. The coarse phase ends early when its σ tolerance is met (or the time
-    // budget needs the rest). At the switch CMA-ES restarts at the best coarse θ with a fixed
-    // log-space spread, and the best-so-far is reset, because E values of the two fidelities are
-    // not comparable. Stopping tolerances apply only at full resolution, and at least
-    // `minFineGenerations` run there.
-    double coarseFactor = 0.66;
+    // Generations [0, coarseGenerations) simulate on the grid round(coarseFactor · resolution) and
+    // only the first coarseTimeShare of the compared clip; the rest at the job's resolution over all
+    // of it. The coarse phase ends early when its σ tolerance is met (or the time budget needs the
+    // rest). At the switch CMA-ES restarts at the best coarse θ with a fixed log-space spread, and
+    // the best-so-far is reset, because E values of the two fidelities are not comparable.
+    // Stopping tolerances apply only at full fidelity, and at least `minFineGenerations` run there.
+    double coarseFactor = 1;
+    double coarseTimeShare = 1.0 / 3;
     int coarseGenerations = -1;  // −1 = ⌊maxGenerations / 2⌋ capped at 10; 0 = no coarse phase
     int minFineGenerations = 3;
 };
@@ -168,6 +169,9 @@ nlohmann::json referenceSource(const Job& job);
 // Loads the reference (checking image size against the camera and that frames remain) and maps
 // reference times onto simulation frames.
 Observation loadObservation(const Job& job);
+// The same observation limited to the reference frames within the first `share` of the simulated
+// clip (the first compared frame always stays).
+Observation firstPartOf(const Observation& observation, double share);
 
 struct Evaluation {
     std::vector<double> theta;
@@ -205,6 +209,7 @@ struct GenerationReport {
     int generation = 0, generations = 0;
     long evaluations = 0;
     int resolution = 0;
+    bool coarse = false;  // a coarse-fidelity generation
     std::vector<double> bestTheta;
     double bestE = 0;
     double sigma = 0;

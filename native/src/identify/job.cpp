@@ -185,6 +185,9 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         job.fidelity.coarseFactor = optionalNumber(f, "coarse_factor", job.fidelity.coarseFactor, where);
         if (job.fidelity.coarseFactor <= 0 || job.fidelity.coarseFactor > 1)
             throw InputError(where + ".coarse_factor: must be in (0, 1]");
+        job.fidelity.coarseTimeShare = optionalNumber(f, "coarse_time_share", job.fidelity.coarseTimeShare, where);
+        if (job.fidelity.coarseTimeShare <= 0 || job.fidelity.coarseTimeShare > 1)
+            throw InputError(where + ".coarse_time_share: must be in (0, 1]");
         job.fidelity.coarseGenerations = optionalInt(f, "coarse_generations", -1, -1, where);
         job.fidelity.minFineGenerations = optionalInt(f, "min_fine_generations", 3, 1, where);
     }
