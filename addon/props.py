@@ -73,6 +73,7 @@ class ViscoscopeJobStatus(bpy.types.PropertyGroup):
     progress: FloatProperty(name="Progress", subtype='PERCENTAGE', min=0.0, max=100.0, default=0.0)
     status: StringProperty(name="Status", default="")
     error: StringProperty(name="Error", default="")
+    warning: StringProperty(name="Warning", default="")  # the engine's latest, e.g. a grid too coarse
     out_dir: StringProperty(name="Output", subtype='DIR_PATH', default="")
     can_resume: BoolProperty(default=False)
 

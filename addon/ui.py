@@ -39,6 +39,8 @@ def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
             row.operator(resume_op, text="Resume", icon='RECOVER_LAST')
         if st.status:
             col.label(text=st.status, icon='INFO')
+    if st.warning:
+        col.label(text=st.warning, icon='ERROR')
     if st.error and not active:
         col.label(text=st.error, icon='ERROR')
 

@@ -44,6 +44,8 @@ def describe_progress(event):
         gen = "Generation %s" % event["generation"]
         if "generations" in event:
             gen += "/%s" % event["generations"]
+        if event.get("fidelity") == "coarse":
+            gen += " (coarse)"
         parts.append(gen)
     elif "frame" in event:
         frame = "Frame %s" % event["frame"]
@@ -70,6 +72,7 @@ def start(context, kind, args, out_dir, on_success):
     st.running = True
     st.progress = 0.0
     st.error = ""
+    st.warning = ""
     st.can_resume = False
     st.status = "Starting…"
     st.out_dir = out_dir
@@ -98,6 +101,8 @@ def pump(context, kind):
             st.progress = 100.0 * engine.progress_fraction(event)
             st.status = describe_progress(event)
             context.window_manager.progress_update(int(st.progress))
+        elif event.get("event") == "warning":
+            st.warning = str(event.get("message", ""))
     if not job.finished:
         if job.cancel_requested:
             st.status = "Cancelling…"

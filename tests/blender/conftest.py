@@ -108,6 +108,8 @@ if sys.argv[1:3] == ["camera", "pnp"]:
     json.dump(solved, open(sys.argv[sys.argv.index("--out") + 1], "w")); sys.exit(0)
 out = sys.argv[sys.argv.index("--out") + 1]
 os.makedirs(out, exist_ok=True)
+if os.environ.get("FAKE_ENGINE_WARNING"):
+    print(json.dumps({"event": "warning", "message": os.environ["FAKE_ENGINE_WARNING"]}), flush=True)
 if sys.argv[1] == "extract":
     os.makedirs(os.path.join(out, "masks"), exist_ok=True)
     for f in range(1, frames + 1):

@@ -144,6 +144,24 @@ def test_pump_cancel_via_runner(ctx, tmp_work, fake_engine, use_engine, monkeypa
     assert st.status.startswith("Cancelled") and st.can_resume and not runner.is_running("simulate")
 
 
+def test_engine_warning_stays_in_the_panel_until_the_next_run(ctx, tmp_work, fake_engine, use_engine, monkeypatch):
+    use_engine(fake_engine)
+    _transfer_scene(ctx)
+    from viscoscope.operators.simulate import VISCOSCOPE_OT_simulate
+    message = "solids[1] (cup): its hole is 1.6 cells across at resolution 16"
+    monkeypatch.setenv("FAKE_ENGINE_WARNING", message)
+    args, out_dir = VISCOSCOPE_OT_simulate.prepare(None, ctx)
+    runner.start(ctx, "simulate", args, out_dir, lambda c, d: None)
+    assert _wait_for(lambda: runner.pump(ctx, "simulate") != 'RUNNING')
+    st = ctx.scene.viscoscope.simulate_job
+    assert st.warning == message and not st.error
+    monkeypatch.delenv("FAKE_ENGINE_WARNING")
+    runner.start(ctx, "simulate", args, out_dir, lambda c, d: None)
+    assert st.warning == ""
+    assert _wait_for(lambda: runner.pump(ctx, "simulate") != 'RUNNING')
+    assert st.warning == ""
+
+
 # ---- the real engine -----------------------------------------------------------------------------
 
 @pytest.mark.engine
@@ -224,3 +242,12 @@ def test_real_engine_cancel_through_the_operator_runner(ctx, tmp_work, engine_pa
     st = ctx.scene.viscoscope.simulate_job
     assert st.status.startswith("Cancelled") and st.error == ""
     assert sorted(o.name for o in bpy.data.objects) == names
+
+
+def test_progress_line_names_the_coarse_phase():
+    event = {"event": "progress", "stage": "identify", "generation": 3, "generations": 40, "fidelity": "coarse",
+             "best_eta": 9.4627, "best_E": 0.0261, "eta": 364.2}
+    line = runner.describe_progress(event)
+    assert line.startswith("Generation 3/40 (coarse) · best η 9.463 Pa·s · best E 0.0261 · ")
+    event["fidelity"] = "full"
+    assert runner.describe_progress(event).startswith("Generation 3/40 · best η")

@@ -86,3 +86,19 @@ TEST(Scene, NonFiniteAndMissingFilesAreRejected) {
     doc["solids"].push_back({{"type", "mesh"}, {"path", "/nonexistent/dipper.obj"}});
     EXPECT_NE(errorOf(doc).find("solids[2].path: cannot read mesh file"), std::string::npos);
 }
+
+// The sample cup's 18 mm hole at 32³ (Δx 5.6 mm) spans 3.2 cells: one warning naming the cup and
+// the resolution that would do; at 48³ (4.8 cells) none, and a cup without a hole never warns.
+TEST(Scene, WarnsWhenACupHoleSpansTooFewCells) {
+    json doc = validScene();
+    std::vector<std::string> warnings = resolutionWarnings(parseScene(doc, "scene.json"));
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("solids[1] (cup): its hole is 3.2 cells across at resolution 32"), std::string::npos)
+        << warnings[0];
+    EXPECT_NE(warnings[0].find("use resolution 45 or more"), std::string::npos) << warnings[0];
+    doc["domain"]["resolution"] = 48;
+    EXPECT_TRUE(resolutionWarnings(parseScene(doc, "scene.json")).empty());
+    doc["domain"]["resolution"] = 16;
+    doc["solids"][1]["hole_radius"] = 0;
+    EXPECT_TRUE(resolutionWarnings(parseScene(doc, "scene.json")).empty());
+}

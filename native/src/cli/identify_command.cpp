@@ -40,6 +40,9 @@ int runIdentify(const IdentifyArguments& args) {
     openvdb::initialize();
     identify::Job job = identify::loadJob(args.job);
     const ProgressReporter progress(args.progress);
+    Scene atJobResolution = job.scene;
+    atJobResolution.domain.resolution = job.resolution;
+    for (const std::string& warning : resolutionWarnings(atJobResolution)) progress.warn(warning);
     identify::IdentifyOptions options;
     options.threads = args.threads;
     options.cancel = &g_cancelRequested;

@@ -12,6 +12,11 @@ namespace viscoscope::cli {
 class ProgressReporter {
 public:
     explicit ProgressReporter(std::string format) : format_(std::move(format)) {}
+    // A warning reaches the user whatever the format: a JSON event, or a line on stderr.
+    void warn(const std::string& message) const {
+        if (format_ == "json") std::cout << nlohmann::json{{"event", "warning"}, {"message", message}}.dump() << std::endl;
+        else std::cerr << "warning: " << message << '\n';
+    }
     void report(const nlohmann::json& event) const {
         if (format_ == "json") {
             std::cout << event.dump() << std::endl;  // flushed: a reader polls line by line

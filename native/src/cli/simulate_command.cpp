@@ -49,6 +49,7 @@ std::string frameName(const char* prefix, int frame, const char* ext) {
 }
 
 int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress) {
+    for (const std::string& warning : resolutionWarnings(scene)) progress.warn(warning);
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) throw InputError(dir.string() + ": cannot create output folder (" + ec.message() + ")");

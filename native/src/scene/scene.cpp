@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <sstream>
 
@@ -196,6 +197,29 @@ MaterialModel parseModel(const FieldReader& r) {
 }
 
 }  // namespace
+
+// Measured on the sample scene (18 mm hole, η = 8 Pa·s, 2 s): the cup drained 60.0 cm³ with the
+// hole 3.2 cells across (32³), 68.9 at 3.6, 43.8 at 4.0, 39.7 at 4.8 and 40.0 at 6.4.
+constexpr double kMinHoleCells = 4.5;
+
+std::vector<std::string> resolutionWarnings(const Scene& scene) {
+    std::vector<std::string> warnings;
+    const double dx = scene.cellSize();
+    for (size_t i = 0; i < scene.solids.size(); ++i) {
+        const auto* cup = std::get_if<CupSolid>(&scene.solids[i]);
+        if (!cup || cup->holeRadius <= 0) continue;
+        const double cells = 2 * cup->holeRadius / dx;
+        if (cells >= kMinHoleCells) continue;
+        const int needed = static_cast<int>(std::ceil(scene.domain.resolution * kMinHoleCells / cells - 1e-9));
+        char line[320];
+        std::snprintf(line, sizeof line,
+                      "solids[%zu] (cup): its hole is %.1f cells across at resolution %d; the drain rate needs "
+                      "about %.1f (the sample cup drained 1.5x too fast at 3.2): use resolution %d or more",
+                      i, cells, scene.domain.resolution, kMinHoleCells, needed);
+        warnings.push_back(line);
+    }
+    return warnings;
+}
 
 double Scene::cellSize() const { return (domain.max - domain.min).maxCoeff() / domain.resolution; }
 

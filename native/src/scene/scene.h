@@ -132,6 +132,9 @@ struct Scene {
 Scene parseScene(const nlohmann::json& doc, const std::string& origin,
                  const std::filesystem::path& baseDir = {});
 Scene loadScene(const std::filesystem::path& file);
+// Valid settings that will give wrong physics, one line each naming the solid and the fix: a cup's
+// hole spanning fewer cells than the drain rate needs.
+std::vector<std::string> resolutionWarnings(const Scene& scene);
 nlohmann::json sceneToJson(const Scene& scene);
 
 }  // namespace viscoscope
