@@ -11,7 +11,8 @@ For each true η, with the built engine only:
      its fields (OUT/fields/frame_*.vdb);
   4. `viscoscope compare` of those fields against the reference simulation's hidden ones;
 and prints η_true, η*, ε_η = |η* − η|/η, ε_p, ε_v, the evaluations, the wall times (the search alone,
-and the whole `identify` with extraction and θ*'s fields), the best single evaluation and the interval.
+and the whole `identify` with extraction and θ*'s fields), the profile parabola's vertex (not used
+as θ*) and the interval.
 
 The defaults are the issue's target (reference 64³, identification 48³, 60 frames) and take hours;
 try it small first:
@@ -115,7 +116,7 @@ def one_row(args, eta, work):
             "eps_p": fields["epsilon_p"], "eps_v": fields["epsilon_v"],
             "evaluations": result["evaluations"], "identify_s": identify_s, "synth_s": synth_s,
             "search_s": result["timings"]["wall_s"], "stop": result["stop"],
-            "best_evaluation": result["viscosity"]["best_evaluation"],
+            "vertex": result["viscosity"].get("profile_fit", {}).get("theta_min", math.nan),
             "interval": result["viscosity"]["interval"]}
 
 
@@ -152,14 +153,14 @@ def main():
           f"seed {args.seed}, {args.frames} frames, {args.width}x{args.height} camera, {args.samples} spp; "
           f"work in {root}", flush=True)
     header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'evals':>6} "
-              f"{'search s':>8} {'identify s':>10} {'synth s':>8} {'best eval':>9}  interval  stop")
+              f"{'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")
     print(header, flush=True)
     try:
         for eta in etas:
             row = one_row(args, eta, root / f"eta_{eta:g}")
             print(f"{row['eta']:8g} {row['eta_star']:9.4g} {percent(row['eps_eta'])} {percent(row['eps_p'])} "
                   f"{percent(row['eps_v'])} {row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
-                  f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['best_evaluation']:9.4g}  "
+                  f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['vertex']:9.4g}  "
                   f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]  {row['stop']}", flush=True)
     finally:
         if not args.keep:

@@ -24,15 +24,15 @@
 //     searches it, starting from the coarse best rather than from a mean that lags behind;
 //   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there.
 //
-// θ*: the vertex of a parabola fitted to E (against 1/η; see fitProfile) over the full-fidelity
-// evaluations near the best one, when the fit is convex, explains E (R² ≥ kMinProfileRSquared) and
-// its vertex lies among the fitted points; otherwise the best full-fidelity evaluation. E(θ)
-// carries a jitter of its own (a drop that pinches off one frame earlier), of ~10 % of E between
-// neighbouring η, so the best of a dozen samples lands anywhere in the flat bottom, and the fit
-// averages the jitter out. But E can also jump (a flow that changes its course above some η), and
-// a parabola across the jump misplaces the minimum: R² was 0.93–0.95 on runs where the vertex beat
-// the best sample (1.9 % against 2.3 %, 2.1 % against 8 %) and 0.85 on one where it did not
-// (17.7 % against 1.9 %, a jump in E from 0.185 to 0.31 between η = 10.2 and 11.6).
+// θ*: the best full-fidelity evaluation. A parabola fitted to E (against 1/η; see fitProfile) over
+// the evaluations near it gives the interval; its vertex is reported (profile_fit.theta_min) but not
+// used as θ*. E(θ) carries a jitter of its own (a drop that pinches off one frame earlier), of ~10 %
+// of E between neighbouring η, which the vertex would average out, but E is not a parabola: against
+// a Blender-rendered 64³ reference at η = 10 it is flat from 7.5 to 10.3 and then jumps (0.18 → 0.27
+// by 10.8), and the vertex fell at 8.2–8.9 in all four 48³ runs (10.8–17.7 % off) where the best
+// evaluation was 0.8–8.1 % off. The vertex did better only on the small CI problems and an
+// exact-rasterized reference (1.9 against 2.3 %, 2.1 against 8 %), and worse on another (2.8 against
+// 0.5 %).
 #include "identify/identify.h"
 
 #include "sim/sim.h"
@@ -102,8 +102,9 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 // The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
 // drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
 // 3–4 cells wide, and the best 32³ evaluations sat 25–35 % above the truth in identify_bench and
-// identification_table runs at 48³.
-// So the fine phase searches a log-space spread of ln 1.4 around the coarse optimum.
+// identification_table runs at 48³. On the job's grid, a third of the clip weighs the flow's phases
+// differently from all of it (truth 10 against a 64³ reference: frames 1–19 favour 9.2–9.8, frames
+// 21–39 favour 7.7), so the fine phase searches a log-space spread of ln 1.4 around the coarse best.
 constexpr double kCoarseToFineShift = 0.35;
 // With a time budget, the coarse phase may use at most half of it, and no more than leaves time for
 // the minimum full-fidelity generations. When the coarse grid was 32³, their (r/r_c)⁴ prediction
@@ -113,7 +114,6 @@ constexpr double kCoarseToFineShift = 0.35;
 // 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³; hence the margin.
 constexpr double kCoarseBudgetShare = 0.5;
 constexpr double kFineTimeMargin = 1.15;
-constexpr double kMinProfileRSquared = 0.9;
 // Version 2 tags every evaluation with its fidelity (version 1 told them apart by resolution).
 constexpr int kCheckpointVersion = 2;
 constexpr const char* kCoarse = "coarse";
@@ -159,10 +159,8 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
 // parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
 // 2 × the RMS residual of the fit (the jitter in E), at least 1 % of E_min.
 struct ProfileFit {
-    double vertex = 0;                   // θ at the parabola's minimum
-    std::array<double, 2> interval{};    // θ
-    bool vertexAmongPoints = false;      // within the span of the fitted points (no extrapolation)
-    double rSquared = 0;                 // the share of E's variance over the points the parabola explains
+    double vertex = 0;                 // θ at the parabola's minimum
+    std::array<double, 2> interval{};  // θ
 };
 
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
@@ -178,12 +176,9 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     if (near.size() < 5) return std::nullopt;
     Eigen::MatrixXd A(near.size(), 3);
     Eigen::VectorXd y(near.size());
-    double lowest = INFINITY, highest = -INFINITY;
     for (size_t i = 0; i < near.size(); ++i) {
         A.row(i) << 1, near[i].first, near[i].first * near[i].first;
         y[i] = near[i].second;
-        lowest = std::min(lowest, near[i].first);
-        highest = std::max(highest, near[i].first);
     }
     const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
     const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
@@ -200,8 +195,6 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     info["delta_E"] = dE;
     if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
     ProfileFit fit;
-    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
-    fit.rSquared = rSquared;
     fit.vertex = theta(uMin);
     const double lo = uMin - half, hi = uMin + half;
     // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
@@ -562,12 +555,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 entry["profile_interval"] = {profile->interval[0],
                                              std::min(profile->interval[1], std::exp(bounds.upper[i]))};
         }
-        const bool fromVertex = profile && profile->vertexAmongPoints && profile->rSquared >= kMinProfileRSquared;
-        if (fromVertex) result.theta[i] = profile->vertex;
         entry["value"] = result.theta[i];
-        entry["estimate"] = fromVertex ? "profile vertex: minimum of the parabola fitted to E (R² ≥ 0.9, the "
-                                         "fitted points span it)"
-                                       : "best full-fidelity evaluation";
         // The reported interval: the profile band when the fit is convex, else the CMA band; always
         // widened to contain θ*.
         std::array<double, 2> band = profile ? profile->interval : cma;
@@ -603,7 +591,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"version", 1},
              {"job", job.file.string()},
              {"parameters", params},
-             {"E", result.E},  // of the best evaluation; θ* itself may be the profile vertex
+             {"E", result.E},
              {"stop", toString(result.stop)},
              {"generations", result.generations},
              {"evaluations", result.evaluations},
@@ -617,7 +605,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                                      std::to_string(coarseRes) + " over simulation frames 0.." +
                                      std::to_string(coarseFrames) + ", the rest at " + std::to_string(fineRes) +
                                      " over 0.." + std::to_string(fineFrames) +
-                                     "; θ* is the profile vertex of the full-fidelity evaluations, else the best of them"},
+                                     "; θ* is the best full-fidelity evaluation"},
              {"resumed_from_generation", resumedFrom},
              {"history", generations},
              {"evaluated", evaluated},

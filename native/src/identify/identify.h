@@ -224,7 +224,7 @@ struct IdentificationResult {
     std::vector<double> theta;
     std::vector<std::array<double, 2>> interval;
     std::string intervalMethod;
-    double E = 0;  // of the best evaluation (θ* may be the profile vertex, not itself evaluated)
+    double E = 0;  // of θ*, the best full-fidelity evaluation
     StopReason stop = StopReason::MaxGenerations;
     int generations = 0;
     long evaluations = 0;
