@@ -220,7 +220,7 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
 }
 
 // A budget far below what the job needs: the coarse phase ends after its first generation, the
-// minimum three full-fidelity generations run, and then the loop stops instead of starting
+// minimum two full-fidelity generations run, and then the loop stops instead of starting
 // another. A rerun with the same budget evaluates nothing more; without a budget it goes on.
 TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     json doc = jobJson();
@@ -235,7 +235,7 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
                 result.document.at("coarse_generations").get<int>(), result.seconds);
     EXPECT_EQ(result.stop, identify::StopReason::TimeBudget);
     EXPECT_EQ(result.document.at("coarse_generations").get<int>(), 1);
-    EXPECT_EQ(result.generations, 1 + 3);
+    EXPECT_EQ(result.generations, 1 + 2);
     const identify::IdentificationResult again = identify::identify(job(doc), out, options);
     EXPECT_EQ(again.evaluations, result.evaluations);
     EXPECT_EQ(again.stop, identify::StopReason::TimeBudget);

@@ -161,6 +161,7 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
 struct ProfileFit {
     double vertex = 0;                 // θ at the parabola's minimum
     std::array<double, 2> interval{};  // θ
+    bool vertexAmongPoints = false;    // within the span of the fitted points (no extrapolation)
 };
 
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
@@ -176,9 +177,12 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     if (near.size() < 5) return std::nullopt;
     Eigen::MatrixXd A(near.size(), 3);
     Eigen::VectorXd y(near.size());
+    double lowest = INFINITY, highest = -INFINITY;
     for (size_t i = 0; i < near.size(); ++i) {
         A.row(i) << 1, near[i].first, near[i].first * near[i].first;
         y[i] = near[i].second;
+        lowest = std::min(lowest, near[i].first);
+        highest = std::max(highest, near[i].first);
     }
     const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
     const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
@@ -196,6 +200,7 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
     ProfileFit fit;
     fit.vertex = theta(uMin);
+    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
     const double lo = uMin - half, hi = uMin + half;
     // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
     fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
@@ -550,14 +555,17 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                     points.emplace_back(e.at("theta")[0].get<double>(), e.at("E").get<double>());
             json info;
             profile = fitProfile(points, bestTheta, 0.5, job.parameters[i].name == "viscosity", info);
+            // A vertex beyond the fitted points is an extrapolation, and so is its band (measured: a
+            // vertex at 5.1 over points up to 2.87 gave [2.82, 7.7] for a truth of 3).
+            if (profile && !profile->vertexAmongPoints) profile.reset();
             entry["profile_fit"] = info;
             if (profile)
                 entry["profile_interval"] = {profile->interval[0],
                                              std::min(profile->interval[1], std::exp(bounds.upper[i]))};
         }
         entry["value"] = result.theta[i];
-        // The reported interval: the profile band when the fit is convex, else the CMA band; always
-        // widened to contain θ*.
+        // The reported interval: the profile band when the fit is convex with its vertex among the
+        // points, else the CMA band; always widened to contain θ*.
         std::array<double, 2> band = profile ? profile->interval : cma;
         band[0] = std::max(std::min(band[0], result.theta[i]), std::exp(bounds.lower[i]));
         band[1] = std::min(std::max(band[1], result.theta[i]), std::exp(bounds.upper[i]));

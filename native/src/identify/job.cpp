@@ -189,7 +189,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         if (job.fidelity.coarseTimeShare <= 0 || job.fidelity.coarseTimeShare > 1)
             throw InputError(where + ".coarse_time_share: must be in (0, 1]");
         job.fidelity.coarseGenerations = optionalInt(f, "coarse_generations", -1, -1, where);
-        job.fidelity.minFineGenerations = optionalInt(f, "min_fine_generations", 3, 1, where);
+        job.fidelity.minFineGenerations = optionalInt(f, "min_fine_generations", job.fidelity.minFineGenerations, 1, where);
     }
     // Check the reference against the camera now, before any simulation.
     if (silhouettes) {
