@@ -99,15 +99,16 @@ Observation loadObservation(const Job& job) {
     return obs;
 }
 
+int lastSimFrame(const Observation& observation) {
+    return std::max(0, *std::max_element(observation.simFrames.begin(), observation.simFrames.end()));
+}
+
 Observation firstPartOf(const Observation& observation, double share) {
     Observation part = observation;
-    int first = -1, last = -1;
+    int first = -1;
     for (int f : observation.simFrames)
-        if (f >= 0) {
-            first = first < 0 ? f : std::min(first, f);
-            last = std::max(last, f);
-        }
-    const double end = std::max<double>(first, share * last);
+        if (f >= 0) first = first < 0 ? f : std::min(first, f);
+    const double end = std::max<double>(first, share * lastSimFrame(observation));
     for (size_t i = 0; i < part.simFrames.size(); ++i)
         if (part.simFrames[i] > end + 1e-9) {
             part.simFrames[i] = -1;
@@ -141,8 +142,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
     const auto setupStart = std::chrono::steady_clock::now();
     sim::Simulation simulation(scene);
     ev.simulationSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - setupStart).count();
-    int lastFrame = 0;
-    for (int f : obs.simFrames) lastFrame = std::max(lastFrame, f);
+    const int lastFrame = lastSimFrame(obs);
     const size_t count = obs.simFrames.size();
     ev.frameE.assign(count, 0.0);
     std::vector<double> areas(count, 0.0);

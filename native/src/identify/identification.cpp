@@ -123,10 +123,6 @@ int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
 }
 
-int lastSimFrame(const Observation& obs) {
-    return *std::max_element(obs.simFrames.begin(), obs.simFrames.end());
-}
-
 int plannedCoarseGenerations(const Job& job, const Observation& obs, const Observation& coarseObs) {
     if (coarseResolution(job) >= job.resolution && lastSimFrame(coarseObs) >= lastSimFrame(obs)) return 0;
     int g = job.fidelity.coarseGenerations >= 0 ? job.fidelity.coarseGenerations
@@ -222,8 +218,7 @@ FieldsSummary writeBestFields(const Job& job, const Observation& obs, const std:
     fs::create_directories(dir);
     const Scene scene = sceneWithParameters(job, theta, job.resolution);
     sim::Simulation simulation(scene);
-    int lastFrame = 0;
-    for (int f : obs.simFrames) lastFrame = std::max(lastFrame, f);
+    const int lastFrame = lastSimFrame(obs);
     std::optional<double> ground;
     for (const Solid& solid : scene.solids)
         if (const auto* g = std::get_if<GroundSolid>(&solid)) ground = g->height;

@@ -175,6 +175,8 @@ Observation loadObservation(const Job& job);
 // The same observation limited to the reference frames within the first `share` of the simulated
 // clip (the first compared frame always stays).
 Observation firstPartOf(const Observation& observation, double share);
+// The last simulation frame any reference frame is compared with.
+int lastSimFrame(const Observation& observation);
 
 struct Evaluation {
     std::vector<double> theta;
