@@ -200,13 +200,14 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     std::printf("[ identify ] profile vertex eta = %.4f (not used as θ*)\n",
                 result.document.at("viscosity").at("profile_fit").value("theta_min", NAN));
     EXPECT_LT(error, 0.10);
-    // The coarse generations simulate the job's grid over the first third of the clip only.
+    // The coarse generations simulate the job's grid over the first third of the clip (frame 3 of
+    // 10), extended to the third reference frame that shows liquid (frames 2, 4, 6).
     int coarse = 0;
     for (const json& e : result.document.at("evaluated")) {
         const bool isCoarse = e.at("fidelity") == "coarse";
         coarse += isCoarse;
         EXPECT_EQ(e.at("resolution").get<int>(), 20);
-        EXPECT_EQ(e.at("frames").get<int>(), isCoarse ? 2 : 10);
+        EXPECT_EQ(e.at("frames").get<int>(), isCoarse ? 6 : 10);
     }
     EXPECT_GT(coarse, 0);
     EXPECT_LE(result.interval[0][0], result.theta[0]);
@@ -245,6 +246,58 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     EXPECT_EQ(more.generations, 5);
     EXPECT_EQ(more.stop, identify::StopReason::MaxGenerations);
     fs::remove_all(out);
+}
+
+// A reference that shows no liquid outside its excluded region (a thick liquid that stays in the
+// cup for the whole clip) cannot bound η from above: the run says so, in its result and by warning.
+TEST_F(IdentifyLoop, WarnsWhenTheReferenceNeverShowsTheLiquid) {
+    const fs::path empty = dir_ / "empty_reference";
+    fs::create_directories(empty / "masks");
+    ReferenceManifest manifest = loadReferenceManifest(dir_ / "reference");
+    for (const std::string& name : manifest.maskFiles) cv::imwrite((empty / name).string(), cv::Mat1b::zeros(64, 96));
+    saveReferenceManifest(manifest, empty);
+    json doc = jobJson();
+    doc["silhouettes"] = "empty_reference";
+    doc["max_generations"] = 1;
+    identify::IdentifyOptions options;
+    options.writeFields = false;
+    std::vector<std::string> warnings;
+    options.onWarning = [&](const std::string& w) { warnings.push_back(w); };
+    const fs::path out = dir_ / "empty_out";
+    const identify::IdentificationResult result = identify::identify(job(doc), out, options);
+    ASSERT_EQ(warnings.size(), 1u);
+    EXPECT_NE(warnings[0].find("only 0 of 5 compared frames"), std::string::npos) << warnings[0];
+    EXPECT_EQ(result.document.at("warnings"), json(warnings));
+    EXPECT_EQ(result.document.at("reference_informative_frames"), 0);
+    fs::remove_all(out);
+}
+
+// The coarse clip: a third of the simulated frames, but at least up to the third reference frame
+// whose silhouette shows liquid in the compared region; liquid only where the region excludes
+// (the cup) or a speckle below 0.1 % of the compared pixels does not count.
+TEST(CoarseClip, ReachesTheThirdFrameThatShowsLiquid) {
+    identify::Observation obs;
+    obs.compared = cv::Mat1b(100, 100, uchar(255));
+    obs.compared(cv::Rect(0, 0, 100, 40)).setTo(0);  // the excluded cup: rows 0–39
+    auto clip = [&](int firstLiquidFrame) {
+        obs.simFrames.clear();
+        obs.masks.clear();
+        for (int frame = 0; frame <= 60; ++frame) {
+            cv::Mat1b mask = cv::Mat1b::zeros(100, 100);
+            mask(cv::Rect(30, 10, 40, 25)).setTo(255);  // liquid in the cup, always
+            mask(cv::Rect(90, 90, 2, 2)).setTo(255);    // 4 px of extraction noise (< 6 = 0.1 %)
+            if (frame >= firstLiquidFrame) mask(cv::Rect(48, 40, 4, 30)).setTo(255);  // the stream
+            obs.simFrames.push_back(frame);
+            obs.masks.push_back(mask);
+        }
+        const identify::Observation part = identify::firstPartOf(obs, 1.0 / 3);
+        return identify::lastSimFrame(part);
+    };
+    EXPECT_EQ(clip(2), 20);   // liquid from frame 2: a third of 60 frames
+    EXPECT_EQ(clip(30), 32);  // liquid from frame 30: frames 30, 31, 32
+    EXPECT_EQ(clip(59), 60);  // two informative frames: the whole clip
+    EXPECT_EQ(clip(100), 60);
+    EXPECT_EQ(identify::informativeSimFrames(obs).size(), 0u);
 }
 
 // ---------------------------------------------------------------------------------------------

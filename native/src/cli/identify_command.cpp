@@ -47,6 +47,7 @@ int runIdentify(const IdentifyArguments& args) {
     options.threads = args.threads;
     options.cancel = &g_cancelRequested;
     options.writeFields = !args.noFields;
+    options.onWarning = [&](const std::string& warning) { progress.warn(warning); };
     options.onGeneration = [&](const identify::GenerationReport& r) {
         nlohmann::json event{{"event", "progress"},      {"stage", "identify"},         {"generation", r.generation},
                              {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},

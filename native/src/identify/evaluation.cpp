@@ -103,12 +103,34 @@ int lastSimFrame(const Observation& observation) {
     return std::max(0, *std::max_element(observation.simFrames.begin(), observation.simFrames.end()));
 }
 
+std::vector<int> informativeSimFrames(const Observation& observation) {
+    const double comparedPixels = observation.compared.empty() ? 0.0 : cv::countNonZero(observation.compared);
+    std::vector<int> frames;
+    for (size_t i = 0; i < observation.simFrames.size(); ++i) {
+        if (observation.simFrames[i] < 0 || observation.masks[i].empty()) continue;
+        const double pixels = silhouetteArea(observation.compared.empty()
+                                                 ? observation.masks[i]
+                                                 : cv::Mat1b(observation.masks[i] & observation.compared));
+        const double total = observation.compared.empty() ? double(observation.masks[i].total()) : comparedPixels;
+        if (pixels > 0 && pixels >= kInformativePixelShare * total) frames.push_back(observation.simFrames[i]);
+    }
+    std::sort(frames.begin(), frames.end());
+    return frames;
+}
+
 Observation firstPartOf(const Observation& observation, double share) {
     Observation part = observation;
     int first = -1;
     for (int f : observation.simFrames)
         if (f >= 0) first = first < 0 ? f : std::min(first, f);
-    const double end = std::max<double>(first, share * lastSimFrame(observation));
+    // A high-η clip may show nothing outside the (excluded) cup for its first third: there every θ
+    // above the truth scores E = 0 and CMA-ES drifted to the upper bound (η = 100 on the sample scene,
+    // whose reference first shows liquid at frame 24 of 60).
+    const std::vector<int> informative = informativeSimFrames(observation);
+    const int informativeEnd = informative.size() >= size_t(kMinInformativeFrames)
+                                   ? informative[kMinInformativeFrames - 1]
+                                   : lastSimFrame(observation);
+    const double end = std::max<double>({double(first), share * lastSimFrame(observation), double(informativeEnd)});
     for (size_t i = 0; i < part.simFrames.size(); ++i)
         if (part.simFrames[i] > end + 1e-9) {
             part.simFrames[i] = -1;

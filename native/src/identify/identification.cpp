@@ -286,6 +286,18 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     Job job = jobIn;
     prepareReference(job, outDir, options.cancel);
     const Observation obs = loadObservation(job);
+    const size_t informativeFrames = informativeSimFrames(obs).size();
+    json warnings = json::array();
+    if (informativeFrames < size_t(kMinInformativeFrames)) {
+        size_t compared = 0;
+        for (int f : obs.simFrames) compared += f >= 0;
+        warnings.push_back("reference: only " + std::to_string(informativeFrames) + " of " + std::to_string(compared) +
+                           " compared frames show liquid outside the excluded region; every θ that keeps the "
+                           "liquid out of sight fits as well, so the result is at best a lower bound (use a "
+                           "longer clip)");
+    }
+    if (options.onWarning)
+        for (const json& w : warnings) options.onWarning(w.get<std::string>());
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
@@ -610,6 +622,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                                      " over 0.." + std::to_string(fineFrames) +
                                      "; θ* is the best full-fidelity evaluation"},
              {"resumed_from_generation", resumedFrom},
+             {"reference_informative_frames", informativeFrames},
+             {"warnings", warnings},
              {"history", generations},
              {"evaluated", evaluated},
              {"timings", {{"wall_s", elapsed}, {"evaluation_cpu_s", evalSeconds}, {"per_fidelity", perFidelity}}}};

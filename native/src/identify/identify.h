@@ -172,8 +172,16 @@ nlohmann::json referenceSource(const Job& job);
 // Loads the reference (checking image size against the camera and that frames remain) and maps
 // reference times onto simulation frames.
 Observation loadObservation(const Job& job);
+// The simulation frames of the reference frames that show liquid: a silhouette covering at least
+// kInformativePixelShare of the compared pixels (extraction noise stays below it), sorted.
+constexpr double kInformativePixelShare = 1e-3;
+std::vector<int> informativeSimFrames(const Observation& observation);
+// So many informative frames the coarse clip must hold, and below which the reference cannot bound
+// θ from above (every θ that keeps the liquid out of sight scores the same E).
+constexpr int kMinInformativeFrames = 3;
 // The same observation limited to the reference frames within the first `share` of the simulated
-// clip (the first compared frame always stays).
+// clip, extended to its kMinInformativeFrames-th informative frame (the whole clip when it has
+// fewer). The first compared frame always stays.
 Observation firstPartOf(const Observation& observation, double share);
 // The last simulation frame any reference frame is compared with.
 int lastSimFrame(const Observation& observation);
@@ -241,6 +249,7 @@ struct IdentificationResult {
 struct IdentifyOptions {
     int threads = 0;  // 0 = all cores (tbb default)
     std::function<void(const GenerationReport&)> onGeneration;
+    std::function<void(const std::string&)> onWarning;  // a result the user should doubt, and why
     const std::atomic<bool>* cancel = nullptr;
     bool writeFields = true;  // the best simulation's last frame .vdb into OUT/fields
 };
