@@ -112,12 +112,16 @@ def one_row(args, eta, work):
                       work / "compare.log")
     fields = json.loads(compared)
     eta_star = result["viscosity"]["value"]
+    # The budget rule's prediction of a full-fidelity generation (made at the switch) against them.
+    predicted = [g["predicted_fine_generation_s"] for g in result["history"] if "predicted_fine_generation_s" in g]
+    full_seconds = [g["seconds"] for g in result["history"] if g["fidelity"] == "full"]
     return {"eta": eta, "eta_star": eta_star, "eps_eta": abs(eta_star - eta) / eta,
             "eps_p": fields["epsilon_p"], "eps_v": fields["epsilon_v"],
             "evaluations": result["evaluations"], "identify_s": identify_s, "synth_s": synth_s,
             "search_s": result["timings"]["wall_s"], "stop": result["stop"],
             "vertex": result["viscosity"].get("profile_fit", {}).get("theta_min", math.nan),
-            "interval": result["viscosity"]["interval"]}
+            "interval": result["viscosity"]["interval"], "warnings": result.get("warnings", []),
+            "predicted_full_s": predicted[-1] if predicted else None, "full_s": full_seconds}
 
 
 def percent(x):
@@ -162,6 +166,11 @@ def main():
                   f"{percent(row['eps_v'])} {row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
                   f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['vertex']:9.4g}  "
                   f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]  {row['stop']}", flush=True)
+            if row["predicted_full_s"] and row["full_s"]:
+                print(f"{'':8} full generations: predicted {row['predicted_full_s']:.1f} s at the switch, measured "
+                      + ", ".join(f"{s:.1f}" for s in row["full_s"]) + " s", flush=True)
+            for warning in row["warnings"]:
+                print(f"{'':8} warning: {warning}", flush=True)
     finally:
         if not args.keep:
             shutil.rmtree(root, ignore_errors=True)

@@ -89,6 +89,17 @@ void printRun(const char* label, const identify::IdentificationResult& r, double
                     v.at("evaluations").get<int>(), v.at("mean_seconds").get<double>(),
                     100 * v.at("simulation_s").get<double>() / v.at("seconds").get<double>(),
                     100 * v.at("silhouette_s").get<double>() / v.at("seconds").get<double>());
+    // The budget rule's prediction of a full-fidelity generation, made at the switch, against them.
+    double predicted = NAN, fullSeconds = 0;
+    int fullGenerations = 0;
+    for (const json& g : r.document.at("history")) {
+        if (g.contains("predicted_fine_generation_s")) predicted = g.at("predicted_fine_generation_s").get<double>();
+        if (g.at("fidelity") == "full") fullSeconds += g.at("seconds").get<double>(), ++fullGenerations;
+    }
+    if (std::isfinite(predicted) && fullGenerations > 0)
+        std::printf("%-22s full generation: predicted %.1f s at the switch, measured %.1f s (mean of %d), ratio %.2f\n",
+                    "", predicted, fullSeconds / fullGenerations, fullGenerations,
+                    fullSeconds / fullGenerations / predicted);
 }
 
 }  // namespace

@@ -197,6 +197,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["camera"] = "camera_away.json";
         expectBadInput(writeJob(doc, "away.json"), "sees none of the liquid");
     }
+    {  // a negative weight for the silhouettes' area track
+        json doc = job();
+        doc["area_track_weight"] = -1.0;
+        expectBadInput(writeJob(doc, "area_weight.json"), "area_track_weight: must be ≥ 0");
+    }
     {  // an unsupported format
         json doc = job();
         doc["format"] = "viscoscope.scene";

@@ -248,6 +248,26 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
+// Without a track CSV, E also compares the silhouettes' area over time with the reference's: the
+// track holds each compared reference frame's mask area; weight 0 turns it off.
+TEST_F(IdentifyLoop, TheReferenceAreaIsATrackUnlessTurnedOff) {
+    json doc = jobJson();
+    const identify::Observation obs = identify::loadObservation(job(doc));
+    ASSERT_TRUE(obs.track.has_value());
+    EXPECT_EQ(obs.trackWeight, 1.0);
+    ASSERT_EQ(obs.track->values[0].size(), 5u);
+    for (size_t i = 0; i < obs.masks.size(); ++i) {
+        EXPECT_NEAR(obs.track->time[i], obs.reference.times[i], 1e-12);
+        EXPECT_EQ(obs.track->values[0][i], cv::countNonZero(obs.masks[i]));
+    }
+    const identify::Evaluation withArea = identify::evaluate(job(doc), obs, {kEtaTrue * 2}, 16);
+    doc["area_track_weight"] = 0.0;
+    const identify::Observation silhouettesOnly = identify::loadObservation(job(doc));
+    EXPECT_FALSE(silhouettesOnly.track.has_value());
+    const identify::Evaluation without = identify::evaluate(job(doc), silhouettesOnly, {kEtaTrue * 2}, 16);
+    EXPECT_GT(withArea.E, without.E);  // the area term: its silhouettes differ from the truth's in area
+}
+
 // A reference that shows no liquid outside its excluded region (a thick liquid that stays in the
 // cup for the whole clip) cannot bound η from above: the run says so, in its result and by warning.
 TEST_F(IdentifyLoop, WarnsWhenTheReferenceNeverShowsTheLiquid) {

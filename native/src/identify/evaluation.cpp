@@ -92,9 +92,21 @@ Observation loadObservation(const Job& job) {
                                   "frame range / before the simulation starts)");
     if (job.trackCsv) {
         obs.track = loadScalarTrackCsv(*job.trackCsv);
+        obs.trackWeight = job.trackWeight;
         bool known = false;
         for (const std::string& column : obs.track->columns) known |= column == "area_px";
         if (!known) throw InputError(job.trackCsv->string() + ": needs an \"area_px\" column (silhouette area)");
+    } else if (job.areaTrackWeight > 0 && informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
+        // (A reference that hardly shows liquid has no area to match: the silhouettes alone decide.)
+        ScalarTrack area{{"area_px"}, {}, {{}}};
+        for (size_t i = 0; i < ref.frames.size(); ++i)
+            if (obs.simFrames[i] >= 0) {
+                area.time.push_back(ref.times[i]);
+                area.values[0].push_back(silhouetteArea(obs.compared.empty() ? obs.masks[i]
+                                                                             : cv::Mat1b(obs.masks[i] & obs.compared)));
+            }
+        obs.track = area;
+        obs.trackWeight = job.areaTrackWeight;
     }
     return obs;
 }
@@ -184,7 +196,9 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             ev.simulatedPixels += areas[i];
             ev.E += obs.reference.weights[i] * ev.frameE[i];
         }
-        ev.silhouetteSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - simEnd).count();
+        const auto frameEnd = std::chrono::steady_clock::now();
+        ev.silhouetteSeconds += std::chrono::duration<double>(frameEnd - simEnd).count();
+        ev.frameSeconds.push_back(std::chrono::duration<double>(frameEnd - simStart).count());
     }
     if (obs.track) {
         size_t column = 0;
@@ -195,7 +209,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
                 times.push_back(obs.reference.times[i]);
                 simulated.push_back(areas[i]);
             }
-        ev.E += job.trackWeight * normalizedSquaredError(simulated, sampleTrack(*obs.track, column, times));
+        ev.E += obs.trackWeight * normalizedSquaredError(simulated, sampleTrack(*obs.track, column, times));
     }
     ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return ev;

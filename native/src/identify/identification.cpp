@@ -110,12 +110,14 @@ constexpr double kCoarseToFineShift = 0.35;
 // the minimum full-fidelity generations. When the coarse grid was 32³, their (r/r_c)⁴ prediction
 // was 190 s per generation where 125–139 s were measured, and the reservation alone left the coarse
 // phase a single generation in a 10-minute run; hence the cap. On the same grid over a third of the
-// clip the prediction is low instead (later frames cost more, with more liquid outside the cup):
-// 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³; hence the margin.
+// clip, scaled by the frame count alone, the prediction was low instead (the first frames are the
+// cheapest): 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³, η = 10, and
+// 160 against 200–230 s at η = 3; see clipLengthening for the better prediction, and the margin.
 constexpr double kCoarseBudgetShare = 0.5;
 constexpr double kFineTimeMargin = 1.15;
-// Version 2 tags every evaluation with its fidelity (version 1 told them apart by resolution).
-constexpr int kCheckpointVersion = 2;
+// Version 2 tags every evaluation with its fidelity (version 1 told them apart by resolution);
+// version 3 adds the silhouettes' area track to E by default.
+constexpr int kCheckpointVersion = 3;
 constexpr const char* kCoarse = "coarse";
 constexpr const char* kFull = "full";
 
@@ -372,13 +374,33 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         for (double x : v) s += x;
         return v.empty() ? 0.0 : s / v.size();
     };
+    // How much longer the full clip takes than the coarse one: its frames plus the remaining ones at
+    // the rate of the coarse clip's last third. The first frames are cheap (the liquid is still in
+    // the cup and the time step long: 0.5 s a frame against 1.0–1.2 s later at η = 3, 48³), so
+    // scaling by the frame count alone predicted 1.2–1.4× too little at η = 1–3.
+    auto clipLengthening = [&] {
+        std::vector<double> ratios;
+        for (const json& e : evaluated) {
+            if (e.at("fidelity") != kCoarse || !e.contains("frame_s")) continue;
+            const std::vector<double> frameSeconds = e.at("frame_s").get<std::vector<double>>();
+            if (frameSeconds.empty()) continue;
+            const size_t tail = std::max<size_t>(1, frameSeconds.size() / 3);
+            double all = 0, last = 0;
+            for (size_t i = 0; i < frameSeconds.size(); ++i) {
+                all += frameSeconds[i];
+                if (i + tail >= frameSeconds.size()) last += frameSeconds[i];
+            }
+            if (all > 0) ratios.push_back((all + (fineFrames - coarseFrames) * last / tail) / all);
+        }
+        return ratios.empty() ? (fineFrames + 1.0) / (coarseFrames + 1.0) : mean(ratios);
+    };
     // Predicted seconds of a full-fidelity generation: measured ones, else the coarse ones scaled
     // by (r/r_c)⁴ (cells × time steps; measured 3.5–6.4× for 32³ → 48³ against 5.1× predicted) and
-    // by the simulated time.
+    // by the clip's length.
     auto fineGenerationSeconds = [&] {
-        return genSecondsFine.empty() ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4) *
-                                            (fineFrames + 1.0) / (coarseFrames + 1.0)
-                                      : mean(genSecondsFine);
+        return genSecondsFine.empty()
+                   ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4) * clipLengthening()
+                   : mean(genSecondsFine);
     };
     auto elapsedNow = [&] { return elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count(); };
     auto fitsBudget = [&](double seconds) { return job.timeBudget <= 0 || elapsedNow() + seconds <= job.timeBudget; };
@@ -412,7 +434,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const int resolution = coarse ? coarseRes : fineRes;
         const char* fidelity = coarse ? kCoarse : kFull;
         const auto genStart = Clock::now();
-        const std::vector<Eigen::VectorXd> xs = es.ask();
+        std::vector<Eigen::VectorXd> xs = es.ask();
+        // The first full-fidelity generation also scores the restart point, the coarse best, in
+        // place of its last sample: with λ = 4 draws of spread ln 1.4, all four can miss the basin
+        // the coarse phase found (η = 30: coarse best 28.6, full samples 14.1 / 36.8 / 20.5 / 19.5).
+        // An injected mean is a zero step for CMA-ES's update (Hansen 2011, "Injecting external
+        // solutions into CMA-ES"), so nothing else changes.
+        if (g == coarseEnd && coarseEnd > 0) xs.back() = es.mean();
         std::vector<Evaluation> evals(xs.size());
         std::vector<std::string> errors(xs.size());
         arena.execute([&] {
@@ -449,6 +477,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                    {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
                    {"E", std::isfinite(evals[k].E) ? json(evals[k].E) : json()},
                    {"frame_E", vec(evals[k].frameE)},
+                   {"frame_s", vec(evals[k].frameSeconds)},
                    {"seconds", evals[k].seconds},
                    {"simulation_s", evals[k].simulationSeconds},
                    {"silhouette_s", evals[k].silhouetteSeconds}};
@@ -484,6 +513,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                            job.timeBudget - job.fidelity.minFineGenerations * kFineTimeMargin * fineGenerationSeconds()))))
             coarseEnd = done;
         if (coarse && done == coarseEnd) {
+            generations.back()["predicted_fine_generation_s"] = fineGenerationSeconds();  // to check it later
             Eigen::VectorXd start = es.mean();
             if (const json* coarseBest = bestAt(kCoarse))
                 for (int i = 0; i < n; ++i) start[i] = std::log(coarseBest->at("theta")[i].get<double>());

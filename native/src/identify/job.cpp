@@ -144,6 +144,9 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         if (!fs::exists(*job.trackCsv)) throw InputError(where + ": " + job.trackCsv->string() + " not found");
     }
 
+    job.areaTrackWeight = optionalNumber(doc, "area_track_weight", job.areaTrackWeight, origin);
+    if (!(job.areaTrackWeight >= 0)) throw InputError(origin + ": area_track_weight: must be ≥ 0");
+
     // Blender's frame_start is simulation time 0 and video frame 0; frames after frame_end are ignored.
     const int frameStart = optionalInt(doc, "frame_start", 0, -1000000, origin);
     const int frameEnd = optionalInt(doc, "frame_end", frameStart + 1000000, -1000000, origin);
