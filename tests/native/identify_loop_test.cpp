@@ -210,6 +210,16 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
         EXPECT_EQ(e.at("frames").get<int>(), isCoarse ? 6 : 10);
     }
     EXPECT_GT(coarse, 0);
+    // The first full-fidelity generation scores the coarse best among its samples.
+    double coarseBestE = INFINITY, coarseBestEta = NAN;
+    bool scored = false;
+    for (const json& e : result.document.at("evaluated"))
+        if (e.at("fidelity") == "coarse" && e.at("E").get<double>() < coarseBestE)
+            coarseBestE = e.at("E").get<double>(), coarseBestEta = e.at("theta")[0].get<double>();
+    for (const json& e : result.document.at("evaluated"))
+        scored |= e.at("generation").get<int>() == result.document.at("coarse_generations").get<int>() + 1 &&
+                  std::abs(e.at("theta")[0].get<double>() / coarseBestEta - 1) < 1e-12;
+    EXPECT_TRUE(scored) << "coarse best " << coarseBestEta;
     EXPECT_LE(result.interval[0][0], result.theta[0]);
     EXPECT_GE(result.interval[0][1], result.theta[0]);
     EXPECT_TRUE(fs::exists(dir_ / "out" / "result.json"));

@@ -34,6 +34,11 @@ nlohmann::json fileStamp(const fs::path& path) {
     }
     return result;
 }
+
+// Silhouette pixels inside the compared region C_f (all of them without one).
+double comparedArea(const cv::Mat1b& mask, const cv::Mat1b& compared) {
+    return silhouetteArea(compared.empty() ? mask : cv::Mat1b(mask & compared));
+}
 }  // namespace
 
 nlohmann::json referenceSource(const Job& job) {
@@ -102,8 +107,7 @@ Observation loadObservation(const Job& job) {
         for (size_t i = 0; i < ref.frames.size(); ++i)
             if (obs.simFrames[i] >= 0) {
                 area.time.push_back(ref.times[i]);
-                area.values[0].push_back(silhouetteArea(obs.compared.empty() ? obs.masks[i]
-                                                                             : cv::Mat1b(obs.masks[i] & obs.compared)));
+                area.values[0].push_back(comparedArea(obs.masks[i], obs.compared));
             }
         obs.track = area;
         obs.trackWeight = job.areaTrackWeight;
@@ -120,9 +124,7 @@ std::vector<int> informativeSimFrames(const Observation& observation) {
     std::vector<int> frames;
     for (size_t i = 0; i < observation.simFrames.size(); ++i) {
         if (observation.simFrames[i] < 0 || observation.masks[i].empty()) continue;
-        const double pixels = silhouetteArea(observation.compared.empty()
-                                                 ? observation.masks[i]
-                                                 : cv::Mat1b(observation.masks[i] & observation.compared));
+        const double pixels = comparedArea(observation.masks[i], observation.compared);
         const double total = observation.compared.empty() ? double(observation.masks[i].total()) : comparedPixels;
         if (pixels > 0 && pixels >= kInformativePixelShare * total) frames.push_back(observation.simFrames[i]);
     }
@@ -192,7 +194,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
             ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared);
-            areas[i] = silhouetteArea(obs.compared.empty() ? silhouette : cv::Mat1b(silhouette & obs.compared));
+            areas[i] = comparedArea(silhouette, obs.compared);
             ev.simulatedPixels += areas[i];
             ev.E += obs.reference.weights[i] * ev.frameE[i];
         }
