@@ -3,7 +3,8 @@
 //
 // Fidelity policy (measured in tests/bench/identify_bench.cpp):
 //   * generations [0, G_c) simulate on the grid r_c = max(8, round(coarse_factor · r)) and only the
-//     first coarse_time_share of the compared clip, G_c = fidelity.coarse_generations, by default
+//     first coarse_time_share of the compared clip (at least up to the third reference frame that
+//     shows liquid: see firstPartOf), G_c = fidelity.coarse_generations, by default
 //     min(⌊max_generations / 2⌋, 10), and always ≤ max_generations − 1 so at least one generation
 //     runs at full fidelity (the job's resolution r, every compared frame);
 //   * by default the coarse phase keeps the job's grid and shortens the clip to its first third.
@@ -17,8 +18,9 @@
 //     or, with a time budget, once another coarse generation would end past kCoarseBudgetShare of it
 //     or past the time the minimum full-fidelity generations are predicted to need;
 //   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
-//     kCoarseToFineShift in every coordinate (counters and random stream go on), and the best-so-
-//     far is reset: E values of different fidelities are not comparable. In one dimension with
+//     kCoarseToFineShift in every coordinate (counters and random stream go on), the first full
+//     generation scores that point too, and the best-so-far is reset: E values of different
+//     fidelities are not comparable. In one dimension with
 //     λ = 4, CMA-ES needs more generations to shrink σ than a 10-minute run has (at 32³ σ went
 //     0.8 → 1.0 → 0.55 in 10 generations), so the coarse phase locates the basin and the fine one
 //     searches it, starting from the coarse best rather than from a mean that lags behind;
