@@ -140,11 +140,11 @@ Observation firstPartOf(const Observation& observation, double share) {
     // A high-η clip may show nothing outside the (excluded) cup for its first third: there every θ
     // above the truth scores E = 0 and CMA-ES drifted to the upper bound (η = 100 on the sample scene,
     // whose reference first shows liquid at frame 24 of 60).
+    const int last = lastSimFrame(observation);
     const std::vector<int> informative = informativeSimFrames(observation);
-    const int informativeEnd = informative.size() >= size_t(kMinInformativeFrames)
-                                   ? informative[kMinInformativeFrames - 1]
-                                   : lastSimFrame(observation);
-    const double end = std::max<double>({double(first), share * lastSimFrame(observation), double(informativeEnd)});
+    const int informativeEnd =
+        informative.size() >= size_t(kMinInformativeFrames) ? informative[kMinInformativeFrames - 1] : last;
+    const double end = std::max<double>({double(first), share * last, double(informativeEnd)});
     for (size_t i = 0; i < part.simFrames.size(); ++i)
         if (part.simFrames[i] > end + 1e-9) {
             part.simFrames[i] = -1;
