@@ -107,6 +107,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                  description="MOG2 variance threshold")
     mask_threshold: IntProperty(name="Threshold", default=127, min=0, max=255,
                                 description="Mask = MOG2 output > threshold (shadows are 127)")
+    edge_coverage: FloatProperty(name="Edge Coverage", default=0.5, min=0.0, max=0.99,
+                                 description="Drop outline pixels the liquid covers less than this share of, "
+                                             "so the masks match simulated silhouettes (0 = off)")
     close_diameter: IntProperty(name="Closing", default=5, min=0, max=64, subtype='PIXEL',
                                 description="Morphological closing kernel diameter, pixels")
     open_diameter: IntProperty(name="Opening", default=3, min=0, max=64, subtype='PIXEL',

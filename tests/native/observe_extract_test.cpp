@@ -140,6 +140,80 @@ TEST(Extraction, SyntheticVideoMatchesTrueMasks) {
     EXPECT_FALSE(fs::exists(dir / "past_end" / "manifest.json"));
 }
 
+namespace {
+
+double srgbToLinear(double v) { return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4); }
+double linearToSrgb(double v) { return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055; }
+
+// A disc and a thin stream that move by fractions of a pixel, as a camera sees them: each pixel
+// mixes liquid and backdrop in linear light by the share of it the shapes cover (8 × 8 samples),
+// then the picture is sRGB-encoded, noised and compressed. `covered` gets the pixels ≥ half covered.
+cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered) {
+    constexpr int kW = 160, kH = 120, kSub = 8;
+    const double cx = 70 + 0.37 * frame, cy = 75 + 0.21 * frame, radius = 14.3 + 0.4 * frame;
+    const double streamLeft = 77.3 + 0.13 * frame, streamWidth = 2.6;
+    const cv::Vec3d backdrop(200, 196, 190), honey(25, 85, 160);  // BGR, sRGB-encoded
+    cv::Mat3b picture(kH, kW);
+    covered.create(kH, kW);
+    for (int row = 0; row < kH; ++row)
+        for (int col = 0; col < kW; ++col) {
+            int inside = 0;
+            for (int sy = 0; sy < kSub; ++sy)
+                for (int sx = 0; sx < kSub; ++sx) {
+                    const double x = col + (sx + 0.5) / kSub, y = row + (sy + 0.5) / kSub;
+                    const bool disc = std::hypot(x - cx, y - cy) < radius;
+                    const bool stream = y < cy && x >= streamLeft && x < streamLeft + streamWidth;
+                    inside += disc || stream;
+                }
+            const double alpha = inside / double(kSub * kSub);
+            covered(row, col) = alpha >= 0.5 ? 255 : 0;
+            for (int c = 0; c < 3; ++c) {
+                const double light = alpha * srgbToLinear(honey[c] / 255) + (1 - alpha) * srgbToLinear(backdrop[c] / 255);
+                picture(row, col)[c] = cv::saturate_cast<uchar>(255 * linearToSrgb(light) + cv::theRNG().gaussian(1.5));
+            }
+        }
+    return picture;
+}
+
+}  // namespace
+
+// The reference must hold the pixels a simulated silhouette holds (centre inside, about half
+// covered), or it is fatter by a fraction of a pixel all round and pulls η low.
+TEST(Extraction, OutlineKeepsThePixelsTheLiquidHalfCovers) {
+    const TempDirectory temp("viscoscope_extract_outline_test");
+    const fs::path& dir = temp.path;
+    cv::theRNG().state = 11;
+    constexpr int kEmpty = 5, kCount = 20;
+    const fs::path video = dir / "drop.mp4";
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), kFps, {160, 120});
+    ASSERT_TRUE(writer.isOpened());
+    std::vector<cv::Mat1b> truth(kCount);
+    cv::Mat1b unused;
+    const cv::Mat3b backdrop = antialiasedFrame(-1000, unused);  // far off: no liquid in view
+    for (int f = 0; f < kCount; ++f)
+        writer.write(f < kEmpty ? backdrop : antialiasedFrame(f, truth[f]));
+    writer.release();
+
+    ExtractionOptions options;
+    options.backgroundFrames = kEmpty;
+    auto areaRatio = [&](double edgeCoverage, const std::string& name) {
+        options.edgeCoverage = edgeCoverage;
+        const ReferenceManifest manifest = extractSilhouettes(video, options, dir / name);
+        double extracted = 0, covered = 0, iou = 0;
+        for (int f = kEmpty; f < kCount; ++f) {
+            extracted += cv::countNonZero(manifest.mask(f));
+            covered += cv::countNonZero(truth[f]);
+            iou += intersectionOverUnion(manifest.mask(f), truth[f]) / (kCount - kEmpty);
+        }
+        std::printf("[ figures  ] edge coverage %.2f: extracted area / half-covered area %.4f, mean IoU %.4f\n",
+                    edgeCoverage, extracted / covered, iou);
+        return extracted / covered;
+    };
+    const double trimmed = areaRatio(0.5, "trimmed"), untrimmed = areaRatio(0, "untrimmed");
+    EXPECT_NEAR(trimmed, 1.0, 0.03);
+    EXPECT_GT(untrimmed, 1.05);  // what the trimming is for: MOG2 alone takes in the grazed pixels
+}
+
 TEST(Extraction, CancelLeavesNoManifest) {
     const TempDirectory temp("viscoscope_extract_cancel_test");
     const fs::path& dir = temp.path;

@@ -93,6 +93,8 @@ Command addExtractCommand(CLI::App& app) {
     sub->add_option("--close", o.closeKernel, "Closing kernel diameter, px")->capture_default_str();
     sub->add_option("--open", o.openKernel, "Opening kernel diameter, px")->capture_default_str();
     sub->add_option("--threshold", o.threshold, "Mask = MOG2 output > T (shadows are 127)")->capture_default_str();
+    sub->add_option("--edge-coverage", o.edgeCoverage, "Drop outline pixels the liquid covers less than this share of (0 = off)")
+        ->capture_default_str();
     sub->add_option("--var-threshold", o.varianceThreshold, "MOG2 variance threshold")->capture_default_str();
     sub->add_option("--min-variance", o.minimumVariance, "Floor on MOG2's per-pixel variance (grey levels squared)")
         ->capture_default_str();

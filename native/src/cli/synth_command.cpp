@@ -163,12 +163,17 @@ void writeJsonFile(const nlohmann::json& doc, const fs::path& file) {
     if (!stream) throw std::runtime_error(file.string() + ": cannot write");
 }
 
-cv::Mat readRender(const fs::path& file, const PinholeCamera& big) {
+// A render at the supersampled size, averaged down to the camera's pixels in linear light, as a
+// sensor's pixel collects it (averaging the sRGB values would darken the outline of bright-on-dark
+// and fatten the liquid's outline).
+cv::Mat cameraPicture(const fs::path& file, const PinholeCamera& big, cv::Size size) {
     const cv::Mat image = cv::imread(file.string(), cv::IMREAD_COLOR);
     if (image.cols != big.width || image.rows != big.height)
         throw std::runtime_error(file.string() + ": Blender's render is missing or not " + std::to_string(big.width) +
                                  "x" + std::to_string(big.height));
-    return image;
+    cv::Mat small;
+    cv::resize(srgbToLinear(image), small, size, 0, 0, cv::INTER_AREA);
+    return linearToSrgb(small);
 }
 
 int runSynth(const SynthArguments& args) {
@@ -257,12 +262,11 @@ int runSynth(const SynthArguments& args) {
     reportRendered();
     const double renderSeconds = secondsSince(renderStart);
 
-    // 4. Down to the camera's size (area averaging) and into a lossy clip.
+    // 4. Down to the camera's size (area averaging in linear light) and into a lossy clip.
     const auto encodeStart = Clock::now();
     const cv::Size size(camera.width, camera.height);
-    cv::Mat small;
-    cv::resize(readRender(renders / "clean_plate.png", big), small, size, 0, 0, cv::INTER_AREA);
-    if (!cv::imwrite((dir / "clean_plate.png").string(), small)) throw std::runtime_error("cannot write clean_plate.png");
+    if (!cv::imwrite((dir / "clean_plate.png").string(), cameraPicture(renders / "clean_plate.png", big, size)))
+        throw std::runtime_error("cannot write clean_plate.png");
     const fs::path partial = dir / "reference.partial.mp4";  // the extension picks the container
     cv::VideoWriter video(partial.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), scene.fps, size);
     if (!video.isOpened()) throw std::runtime_error(partial.string() + ": OpenCV cannot write an mp4v video");
@@ -271,8 +275,7 @@ int runSynth(const SynthArguments& args) {
             progress.report({{"event", "cancelled"}, {"stage", "encode"}, {"done", f}});
             return kExitCancelled;
         }
-        cv::resize(readRender(images[f], big), small, size, 0, 0, cv::INTER_AREA);
-        video.write(small);
+        video.write(cameraPicture(images[f], big, size));
         progress.report({{"event", "progress"}, {"stage", "encode"}, {"done", f + 1}, {"total", images.size()}});
     }
     video.release();

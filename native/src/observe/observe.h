@@ -29,6 +29,13 @@ public:
 };
 
 // ---------------------------------------------------------------------------------------------
+// Light as a sensor adds it. A pixel's footprint mixes colours in linear light, while video and
+// renders store them sRGB-encoded; averaging and coverage estimates convert first.
+
+cv::Mat srgbToLinear(const cv::Mat& image);  // 8-bit sRGB → float in [0, 1], same channels
+cv::Mat linearToSrgb(const cv::Mat& image);  // float in [0, 1] → 8-bit sRGB, rounded
+
+// ---------------------------------------------------------------------------------------------
 // Reference extraction (`viscoscope extract`)
 
 struct ExtractionOptions {
@@ -49,6 +56,11 @@ struct ExtractionOptions {
     // (median ratio) so that a global brightness change is not taken for liquid.
     bool compensateGain = true;
     int threshold = 127;  // MOG2 marks shadows 127 and foreground 255; mask = value > threshold
+    // Edge pixels the liquid covers less than this share of are dropped (0 = keep MOG2's outline).
+    // MOG2 flags a pixel the outline only grazes (≈ 10 % covered), while a simulated silhouette holds
+    // the pixels whose centre is inside, i.e. about half covered: without this the reference is
+    // ~0.4 px fatter on every side, which biases η low (see extract.cpp).
+    double edgeCoverage = 0.5;
     int closeKernel = 5;  // morphological closing, then opening; elliptic kernel diameters in px
     int openKernel = 3;
     // Static exclusion C (pixels not compared), e.g. the container: a PNG with nonzero = excluded,
@@ -96,9 +108,9 @@ void saveReferenceManifest(const ReferenceManifest& manifest, const std::filesys
 // ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
 // exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
-// mog2_minimum_variance, compensate_gain, threshold, close_kernel_px, open_kernel_px. Missing names
-// keep their defaults; paths resolve against `baseDir` ("" = none). Unknown names, wrong types, bad
-// values and missing files throw InputError("<origin>.<name>: ...").
+// mog2_minimum_variance, compensate_gain, threshold, edge_coverage, close_kernel_px,
+// open_kernel_px. Missing names keep their defaults; paths resolve against `baseDir` ("" = none).
+// Unknown names, wrong types, bad values and missing files throw InputError("<origin>.<name>: ...").
 ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin,
                                          const std::filesystem::path& baseDir);
 
