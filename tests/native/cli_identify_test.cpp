@@ -202,6 +202,12 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["area_track_weight"] = -1.0;
         expectBadInput(writeJob(doc, "area_weight.json"), "area_track_weight: must be ≥ 0");
     }
+    {  // a measured area track that never leaves 0
+        std::ofstream(dir_ / "flat_track.csv") << "time_s,area_px\n0,0\n10,0\n";
+        json doc = job();
+        doc["track"] = "flat_track.csv";
+        expectBadInput(writeJob(doc, "flat_track.json"), "area_px is 0 at every compared frame");
+    }
     {  // an unsupported format
         json doc = job();
         doc["format"] = "viscoscope.scene";

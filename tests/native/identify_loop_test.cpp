@@ -328,6 +328,16 @@ TEST(CoarseClip, ReachesTheThirdFrameThatShowsLiquid) {
     EXPECT_EQ(clip(59), 60);  // two informative frames: the whole clip
     EXPECT_EQ(clip(100), 60);
     EXPECT_EQ(identify::informativeSimFrames(obs).size(), 0u);
+
+    // A measured area track that is still 0 over the coarse clip has nothing to normalize by there:
+    // the coarse part scores silhouettes alone, the whole clip keeps the track.
+    clip(2);
+    obs.reference.times.clear();
+    for (int frame = 0; frame <= 60; ++frame) obs.reference.times.push_back(frame / 30.0);
+    obs.track = ScalarTrack{{"area_px"}, {0.0, 1.0, 2.0}, {{0.0, 0.0, 900.0}}};
+    EXPECT_FALSE(identify::firstPartOf(obs, 1.0 / 3).track.has_value());
+    obs.track->values[0][0] = 10;
+    EXPECT_TRUE(identify::firstPartOf(obs, 1.0 / 3).track.has_value());
 }
 
 // ---------------------------------------------------------------------------------------------

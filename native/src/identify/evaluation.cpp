@@ -39,6 +39,21 @@ nlohmann::json fileStamp(const fs::path& path) {
 double comparedArea(const cv::Mat1b& mask, const cv::Mat1b& compared) {
     return silhouetteArea(compared.empty() ? mask : cv::Mat1b(mask & compared));
 }
+
+// The reference track's area at the times of the compared frames.
+std::vector<double> referenceTrack(const Observation& obs) {
+    size_t column = 0;
+    while (obs.track->columns[column] != "area_px") ++column;
+    std::vector<double> times;
+    for (size_t i = 0; i < obs.simFrames.size(); ++i)
+        if (obs.simFrames[i] >= 0) times.push_back(obs.reference.times[i]);
+    return sampleTrack(*obs.track, column, times);
+}
+
+bool allZero(const std::vector<double>& values) {
+    return std::all_of(values.begin(), values.end(), [](double v) { return v == 0; });
+}
+
 }  // namespace
 
 nlohmann::json referenceSource(const Job& job) {
@@ -101,6 +116,8 @@ Observation loadObservation(const Job& job) {
         bool known = false;
         for (const std::string& column : obs.track->columns) known |= column == "area_px";
         if (!known) throw InputError(job.trackCsv->string() + ": needs an \"area_px\" column (silhouette area)");
+        if (allZero(referenceTrack(obs)))
+            throw InputError(job.trackCsv->string() + ": area_px is 0 at every compared frame; nothing to match");
     } else if (job.areaTrackWeight > 0 && informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
         // (A reference that hardly shows liquid has no area to match: the silhouettes alone decide.)
         ScalarTrack area{{"area_px"}, {}, {{}}};
@@ -150,6 +167,9 @@ Observation firstPartOf(const Observation& observation, double share) {
             part.simFrames[i] = -1;
             part.masks[i] = cv::Mat1b();
         }
+    // A measured track may stay 0 through the first part (the liquid not yet in view of the
+    // measurement): it has no scale to normalize by there, and the silhouettes decide alone.
+    if (part.track && allZero(referenceTrack(part))) part.track.reset();
     return part;
 }
 
@@ -203,15 +223,10 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         ev.frameSeconds.push_back(std::chrono::duration<double>(frameEnd - simStart).count());
     }
     if (obs.track) {
-        size_t column = 0;
-        while (obs.track->columns[column] != "area_px") ++column;
-        std::vector<double> times, simulated;
+        std::vector<double> simulated;
         for (size_t i = 0; i < count; ++i)
-            if (obs.simFrames[i] >= 0) {
-                times.push_back(obs.reference.times[i]);
-                simulated.push_back(areas[i]);
-            }
-        ev.E += obs.trackWeight * normalizedSquaredError(simulated, sampleTrack(*obs.track, column, times));
+            if (obs.simFrames[i] >= 0) simulated.push_back(areas[i]);
+        ev.E += obs.trackWeight * normalizedSquaredError(simulated, referenceTrack(obs));
     }
     ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     return ev;
