@@ -112,8 +112,11 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                              "so the masks match simulated silhouettes (0 = off)")
     close_diameter: IntProperty(name="Closing", default=5, min=0, max=64, subtype='PIXEL',
                                 description="Morphological closing kernel diameter, pixels")
-    open_diameter: IntProperty(name="Opening", default=3, min=0, max=64, subtype='PIXEL',
-                               description="Morphological opening kernel diameter, pixels")
+    open_diameter: IntProperty(name="Opening", default=0, min=0, max=64, subtype='PIXEL',
+                               description="Morphological opening kernel diameter, pixels (0 = none: an opening "
+                                           "also erases thin streams and small drops)")
+    min_blob: IntProperty(name="Smallest Blob", default=3, min=0, max=10000, subtype='PIXEL',
+                          description="Drop specks smaller than this many pixels")
     # Identify
     eta_initial: FloatProperty(name="Initial η", description="Pa·s", default=5.0, min=1e-6, precision=4)
     eta_spread: FloatProperty(name="Spread", description="Initial CMA-ES spread (factor of η, log space)",

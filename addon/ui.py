@@ -135,6 +135,7 @@ class VIEW3D_PT_viscoscope_silhouettes(_ViscoscopePanel, bpy.types.Panel):
         col.prop(vs, "edge_coverage")
         col.prop(vs, "close_diameter")
         col.prop(vs, "open_diameter")
+        col.prop(vs, "min_blob")
         draw_job(layout, context, "extract", "viscoscope.preview_silhouettes", "Preview Silhouettes")
 
 

@@ -91,7 +91,8 @@ Command addExtractCommand(CLI::App& app) {
     sub->add_option("--exclude-polygons", args->excludePolygons, "JSON [[[x,y],...],...] of excluded polygons");
     sub->add_option("--weights", o.weights, "Frame weights: \"0-10:1,11-20:0\" or one value per frame \"1,1,0\"");
     sub->add_option("--close", o.closeKernel, "Closing kernel diameter, px")->capture_default_str();
-    sub->add_option("--open", o.openKernel, "Opening kernel diameter, px")->capture_default_str();
+    sub->add_option("--open", o.openKernel, "Opening kernel diameter, px (0 = none)")->capture_default_str();
+    sub->add_option("--min-blob", o.minBlobPixels, "Drop blobs smaller than this many pixels")->capture_default_str();
     sub->add_option("--threshold", o.threshold, "Mask = MOG2 output > T (shadows are 127)")->capture_default_str();
     sub->add_option("--edge-coverage", o.edgeCoverage, "Drop outline pixels the liquid covers less than this share of (0 = off)")
         ->capture_default_str();

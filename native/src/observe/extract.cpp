@@ -1,6 +1,6 @@
 // Reference silhouettes from video: MOG2 background subtraction (Zivkovic 2004), a threshold that
-// drops shadows, edge pixels trimmed to half coverage, morphological closing then opening, and a
-// static exclusion mask.
+// drops shadows, edge pixels trimmed to half coverage, morphological closing (and optionally
+// opening), speckle removal by blob size, and a static exclusion mask.
 #include "observe/observe.h"
 
 #include "observe/frame_source.h"
@@ -52,6 +52,7 @@ public:
         if (options_.edgeCoverage > 0) dropThinlyCoveredEdges(matched, mask);
         if (!closeKernel_.empty()) cv::morphologyEx(mask, mask, cv::MORPH_CLOSE, closeKernel_);
         if (!openKernel_.empty()) cv::morphologyEx(mask, mask, cv::MORPH_OPEN, openKernel_);
+        if (options_.minBlobPixels > 1) dropSmallBlobs(mask);
         if (!excluded.empty()) mask.setTo(0, excluded);
         return mask;
     }
@@ -59,6 +60,17 @@ public:
 private:
     static cv::Mat ellipticKernel(int size) {
         return size > 1 ? cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(size, size)) : cv::Mat();
+    }
+
+    void dropSmallBlobs(cv::Mat1b& mask) const {
+        cv::Mat1i labels, stats;
+        cv::Mat centroids;
+        const int count = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
+        for (int row = 0; row < mask.rows; ++row)
+            for (int col = 0; col < mask.cols; ++col)
+                if (const int label = labels(row, col); label > 0 && label < count &&
+                                                         stats(label, cv::CC_STAT_AREA) < options_.minBlobPixels)
+                    mask(row, col) = 0;
     }
 
     const cv::Mat& background() {
@@ -217,6 +229,7 @@ void validateOptions(const ExtractionOptions& o) {
     if (o.threshold < 0 || o.threshold > 254) throw InputError("--threshold must be in [0, 254]");
     if (!(o.edgeCoverage >= 0 && o.edgeCoverage < 1)) throw InputError("--edge-coverage must be in [0, 1)");
     if (o.closeKernel < 0 || o.openKernel < 0) throw InputError("--close/--open kernel sizes must be ≥ 0");
+    if (o.minBlobPixels < 0) throw InputError("--min-blob must be ≥ 0");
     if (!(o.varianceThreshold > 0)) throw InputError("--var-threshold must be > 0");
     if (!(o.minimumVariance > 0)) throw InputError("--min-variance must be > 0");
     if (o.fps && !(std::isfinite(*o.fps) && *o.fps > 0)) throw InputError("--fps must be > 0");
@@ -284,6 +297,7 @@ nlohmann::json parametersJson(const ExtractionOptions& o) {
             {"edge_coverage", o.edgeCoverage},
             {"close_kernel_px", o.closeKernel},
             {"open_kernel_px", o.openKernel},
+            {"min_blob_px", o.minBlobPixels},
             {"exclude_mask", o.excludeMask ? fs::absolute(*o.excludeMask).string() : ""},
             {"exclude_polygons", polygons},
             {"weights", o.weights}};
@@ -357,7 +371,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
     static const std::vector<std::string> known{
         "first", "last", "step", "fps", "background_frames", "clean_plate", "exclude_mask", "exclude_polygons",
         "weights", "mog2_variance_threshold", "mog2_minimum_variance", "compensate_gain", "threshold",
-        "edge_coverage", "close_kernel_px", "open_kernel_px"};
+        "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
     for (const auto& [name, value] : doc.items())
         if (std::find(known.begin(), known.end(), name) == known.end())
             throw InputError(origin + "." + name + ": unknown extraction option");
@@ -392,6 +406,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
     o.edgeCoverage = in.number("edge_coverage", o.edgeCoverage);
     o.closeKernel = in.integer("close_kernel_px", o.closeKernel);
     o.openKernel = in.integer("open_kernel_px", o.openKernel);
+    o.minBlobPixels = in.integer("min_blob_px", o.minBlobPixels);
     try {
         validateOptions(o);
         parseFrameWeights(o.weights, {});

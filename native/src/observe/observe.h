@@ -62,7 +62,13 @@ struct ExtractionOptions {
     // ~0.4 px fatter on every side, which biases η low (see extract.cpp).
     double edgeCoverage = 0.5;
     int closeKernel = 5;  // morphological closing, then opening; elliptic kernel diameters in px
-    int openKernel = 3;
+    // Off by default: an opening also erases what is thinner than its kernel, a 2-px stream or a
+    // drop just leaving the cup (the η = 100 sample reference lost 23 px of drop a frame), which the
+    // simulated silhouettes keep. Speckles go by size instead:
+    int openKernel = 0;
+    // Blobs (8-connected) smaller than this many pixels are dropped: compression and render noise
+    // leaves single pixels (14 a frame in that reference), liquid comes in larger pieces.
+    int minBlobPixels = 3;
     // Static exclusion C (pixels not compared), e.g. the container: a PNG with nonzero = excluded,
     // and/or polygons in pixel coordinates. Masks are zeroed there too, so tracks ignore it.
     std::optional<std::filesystem::path> excludeMask;
@@ -109,7 +115,7 @@ void saveReferenceManifest(const ReferenceManifest& manifest, const std::filesys
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
 // exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
 // mog2_minimum_variance, compensate_gain, threshold, edge_coverage, close_kernel_px,
-// open_kernel_px. Missing names keep their defaults; paths resolve against `baseDir` ("" = none).
+// open_kernel_px, min_blob_px. Missing names keep their defaults; paths resolve against `baseDir` ("" = none).
 // Unknown names, wrong types, bad values and missing files throw InputError("<origin>.<name>: ...").
 ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin,
                                          const std::filesystem::path& baseDir);
