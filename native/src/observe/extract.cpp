@@ -65,11 +65,10 @@ private:
     void dropSmallBlobs(cv::Mat1b& mask) const {
         cv::Mat1i labels, stats;
         cv::Mat centroids;
-        const int count = cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
+        cv::connectedComponentsWithStats(mask, labels, stats, centroids, 8, CV_32S);
         for (int row = 0; row < mask.rows; ++row)
             for (int col = 0; col < mask.cols; ++col)
-                if (const int label = labels(row, col); label > 0 && label < count &&
-                                                         stats(label, cv::CC_STAT_AREA) < options_.minBlobPixels)
+                if (labels(row, col) > 0 && stats(labels(row, col), cv::CC_STAT_AREA) < options_.minBlobPixels)
                     mask(row, col) = 0;
     }
 
@@ -114,7 +113,7 @@ private:
     // Scales each channel by the median background/frame ratio over a sparse grid of pixels. The
     // median ignores the liquid as long as it covers less than half of the picture.
     cv::Mat gainMatched(const cv::Mat& frame) {
-        background();
+        const cv::Mat& plate = background();
         constexpr int kStride = 7;
         constexpr int kDarkest = 16;  // ratios of near-black pixels are mostly noise
         cv::Scalar gain(1, 1, 1);
@@ -122,7 +121,7 @@ private:
             std::vector<float> ratios;
             for (int row = kStride / 2; row < frame.rows; row += kStride)
                 for (int col = kStride / 2; col < frame.cols; col += kStride) {
-                    const int b = background_.at<cv::Vec3b>(row, col)[channel];
+                    const int b = plate.at<cv::Vec3b>(row, col)[channel];
                     const int f = frame.at<cv::Vec3b>(row, col)[channel];
                     if (b >= kDarkest && f >= kDarkest) ratios.push_back(float(b) / float(f));
                 }
