@@ -65,6 +65,13 @@ void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, in
             for (int i = from[0]; i <= to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
 }
 
+// The cells on either side of the face at `face` (lattice coordinates) on `axis`, −1 outside the
+// domain: the face sits on the low side of the cell with its coordinates.
+std::pair<int, int> faceCells(const Lattice& cells, const Vec3i& face, int axis) {
+    Vec3i high = face;
+    return {cells.neighbour(face, axis, -1), cells.resolve(high) ? cells.index(high[0], high[1], high[2]) : -1};
+}
+
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
     if (const auto* box = std::get_if<LiquidBox>(&source))
         return (x.array() >= box->min.array()).all() && (x.array() <= box->max.array()).all();
@@ -478,9 +485,7 @@ void Simulation::applySurfaceTension(double dt) {
         Field& u = state_.velocity[a];
         forEachNearBox(u.lattice, activeLo_, activeHi_, 1, [&](int f, const Vec3i& c) {
             if (fractions_.solidFace[a][f]) return;
-            const int lo = cells.neighbour(c, a, -1);
-            Vec3i hiC = c;
-            const int hi = cells.resolve(hiC) ? cells.index(hiC[0], hiC[1], hiC[2]) : -1;
+            const auto [lo, hi] = faceCells(cells, c, a);
             if (lo < 0 || hi < 0) return;
             if (fractions_.cell[lo] < kMinWeight && fractions_.cell[hi] < kMinWeight) return;
             const double mass = scene_.material.density * std::max(fractions_.face[a][f], kMinMassFraction);
@@ -636,9 +641,7 @@ StepStats Simulation::step(double dt) {
                 u[f] = 0;
                 return;
             }
-            const int lo = cells.neighbour(c, a, -1);
-            Vec3i hiC = c;
-            const int hi = cells.resolve(hiC) ? cells.index(hiC[0], hiC[1], hiC[2]) : -1;
+            const auto [lo, hi] = faceCells(cells, c, a);
             if ((lo >= 0 && fractions_.cell[lo] >= kMinWeight) || (hi >= 0 && fractions_.cell[hi] >= kMinWeight))
                 validFace_[a][f] = 1;
         });
