@@ -130,8 +130,8 @@ struct Job {
     // on, η 2 % apart can send the stream and puddle along other paths (η = 30 against a 64³
     // reference at 48³: E 0.174 at 20.4, 0.204 at 20.0, 0.185–0.20 at 24–30), and the best of a few
     // evaluations landed 32 % off. The area term, which follows the drained volume, is smooth there
-    // (0.13 / 0.055 / 0.053 / 0.065 / 0.096 at 20 / 24 / 28 / 30 / 33), though its minimum sits about
-    // 10 % low at 48³ against 64³ (also at η = 10: 8.95), as the silhouettes' trend does less.
+    // (0.13 / 0.055 / 0.053 / 0.065 / 0.096 at 20 / 24 / 28 / 30 / 33). Its minimum sat about 10 % low
+    // (also at η = 10: 8.95) while extraction kept the grazed outline pixels (fixed by edge_coverage).
     double areaTrackWeight = 1;
     double timeOffset = 0;  // simulation time of reference time 0 (s)
     int lastSourceFrame = 1000000;  // frame_end − frame_start: later reference frames are ignored

@@ -73,8 +73,15 @@ private:
     }
 
     const cv::Mat& background() {
-        if (background_.empty()) subtractor_->getBackgroundImage(background_);
+        if (background_.empty()) {
+            subtractor_->getBackgroundImage(background_);
+            linearBackground_ = srgbToLinear(background_);  // learning is frozen: converted once
+        }
         return background_;
+    }
+    const cv::Mat& linearBackground() {
+        background();
+        return linearBackground_;
     }
 
     // A sensor adds light linearly, so a pixel the liquid covers by α reads α F + (1 − α) B in linear
@@ -86,7 +93,7 @@ private:
     // as sRGB-encoded, as phones and Blender write it. Hand-written: OpenCV has no coverage matting.
     void dropThinlyCoveredEdges(const cv::Mat& frame, cv::Mat1b& mask) {
         constexpr int kPasses = 2;  // camera blur spreads an outline over about two pixels
-        const cv::Mat1f contrast = linearDistance(frame, background());
+        const cv::Mat1f contrast = colourDistance(srgbToLinear(frame), linearBackground());
         const cv::Mat window = cv::getStructuringElement(cv::MORPH_RECT, cv::Size(5, 5));
         const cv::Mat cross = cv::getStructuringElement(cv::MORPH_CROSS, cv::Size(3, 3));
         cv::Mat1f maskedContrast(contrast.size(), 0.0f), fullContrast;
@@ -100,9 +107,9 @@ private:
         }
     }
 
-    static cv::Mat1f linearDistance(const cv::Mat& frame, const cv::Mat& background) {
+    static cv::Mat1f colourDistance(const cv::Mat& frame, const cv::Mat& background) {
         cv::Mat difference;
-        cv::absdiff(srgbToLinear(frame), srgbToLinear(background), difference);
+        cv::absdiff(frame, background, difference);
         difference = difference.mul(difference);
         cv::Mat1f squared, distance;
         cv::transform(difference, squared, cv::Matx13f(1, 1, 1));
@@ -137,7 +144,7 @@ private:
     const ExtractionOptions& options_;
     cv::Ptr<cv::BackgroundSubtractorMOG2> subtractor_;
     cv::Mat closeKernel_, openKernel_;
-    cv::Mat background_;
+    cv::Mat background_, linearBackground_;
 };
 
 // Writes everything under temporary names and renames into place on commit(); whatever was not
