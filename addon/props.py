@@ -107,6 +107,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                  description="MOG2 variance threshold")
     mask_threshold: IntProperty(name="Threshold", default=127, min=0, max=255,
                                 description="Mask = MOG2 output > threshold (shadows are 127)")
+    shadow_threshold: FloatProperty(name="Shadow Threshold", default=0.7, min=0.01, max=1.0,
+                                    description="A pixel darker than the background by a brightness ratio "
+                                                "above this, colour unchanged, is a shadow, not liquid")
     edge_coverage: FloatProperty(name="Edge Coverage", default=0.5, min=0.0, max=0.99,
                                  description="Drop outline pixels the liquid covers less than this share of, "
                                              "so the masks match simulated silhouettes (0 = off)")

@@ -132,6 +132,7 @@ class VIEW3D_PT_viscoscope_silhouettes(_ViscoscopePanel, bpy.types.Panel):
         col.prop(vs, "background_frames")
         col.prop(vs, "var_threshold")
         col.prop(vs, "mask_threshold")
+        col.prop(vs, "shadow_threshold")
         col.prop(vs, "edge_coverage")
         col.prop(vs, "close_diameter")
         col.prop(vs, "open_diameter")

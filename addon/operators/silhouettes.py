@@ -51,7 +51,8 @@ class VISCOSCOPE_OT_preview_silhouettes(EngineOperator, bpy.types.Operator):
         out_dir = os.path.join(scene_export.work_dir(context.scene), "silhouettes")
         os.makedirs(out_dir, exist_ok=True)
         options = {"background_frames": vs.background_frames, "var_threshold": vs.var_threshold,
-                   "threshold": vs.mask_threshold, "edge_coverage": vs.edge_coverage,
+                   "threshold": vs.mask_threshold, "shadow_threshold": vs.shadow_threshold,
+                   "edge_coverage": vs.edge_coverage,
                    "close": vs.close_diameter, "open": vs.open_diameter, "min_blob": vs.min_blob}
         return engine.extract_args(exe, video, out_dir, options), out_dir
 

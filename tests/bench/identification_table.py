@@ -68,14 +68,22 @@ def run(command, log):
     return result.stdout, time.monotonic() - started
 
 
+def clip_step(args, eta):
+    """Frames between compared frames. The drain rate through the hole scales about as 1/η, so above
+    --slow-eta the clip is that many times longer and compared every that many frames: still
+    --frames compared frames, and about as much liquid outside the cup at the end as at --slow-eta."""
+    return max(1, round(eta / args.slow_eta))
+
+
 def one_row(args, eta, work):
     work.mkdir(parents=True, exist_ok=True)
+    step = clip_step(args, eta)
     camera = work / "side_camera.json"
     camera.write_text(json.dumps(side_camera(args.width, args.height, args.focal)))
     synth = work / "synth"
     synth_command = [args.engine, "synth", args.scene, "--camera", camera, "--out", synth,
                      "--resolution", args.reference_resolution, "--seed", args.reference_seed,
-                     "--viscosity", eta, "--frames", args.frames, "--samples", args.samples, "--progress", "none"]
+                     "--viscosity", eta, "--frames", args.frames * step, "--samples", args.samples, "--progress", "none"]
     # A --keep folder's finished reference is reused when made with the same arguments (whichever
     # engine binary ran them; its time is then shown as "reused").
     made_by = work / "synth_command.json"
@@ -93,7 +101,7 @@ def one_row(args, eta, work):
         "camera": "synth/camera.json",
         "video": "synth/reference.mp4",
         "extraction": {"clean_plate": "synth/clean_plate.png", "exclude_mask": "synth/exclude.png",
-                       "weights": "0:0"},  # frame 0 is the same for every η
+                       "weights": "0:0", "step": step},  # frame 0 is the same for every η
         "parameters": [{"name": "viscosity", "initial": initial, "spread": 3 * initial,
                         "min": args.eta_min, "max": args.eta_max, "log": True}],
         "resolution": args.resolution,
@@ -133,7 +141,9 @@ def main():
     parser.add_argument("--etas", default="1,3,10,30,100,300", help="true viscosities, Pa·s, comma-separated")
     parser.add_argument("--reference-resolution", type=int, default=64, help="synth's resolution")
     parser.add_argument("--resolution", type=int, default=48, help="the identification's resolution")
-    parser.add_argument("--frames", type=int, default=60, help="frames after the initial one (at the scene's fps)")
+    parser.add_argument("--frames", type=int, default=60, help="compared frames after the initial one (at the scene's fps)")
+    parser.add_argument("--slow-eta", type=float, default=100,
+                        help="above this η the clip is η/slow-eta times longer, compared at that step")
     parser.add_argument("--reference-seed", type=int, default=11)
     parser.add_argument("--seed", type=int, default=3, help="the identification's seed (CMA-ES and particles)")
     parser.add_argument("--generations", type=int, default=40, help="max_generations of the job")
@@ -154,7 +164,7 @@ def main():
 
     root = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="viscoscope_table_"))
     print(f"reference {args.reference_resolution}³ seed {args.reference_seed}, identification {args.resolution}³ "
-          f"seed {args.seed}, {args.frames} frames, {args.width}x{args.height} camera, {args.samples} spp; "
+          f"seed {args.seed}, {args.frames} compared frames (clips longer above η = {args.slow_eta:g}), {args.width}x{args.height} camera, {args.samples} spp; "
           f"work in {root}", flush=True)
     header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'evals':>6} "
               f"{'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")

@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -348,4 +349,54 @@ TEST(ScalarTracks, GroundObservablesOfParticles) {
     EXPECT_NEAR(front, radius, 0.02 * radius);
     EXPECT_DOUBLE_EQ(drainedVolume(particles, 1e-9, 0.01), 20000 * 1e-9);
     EXPECT_THROW(frontAlongGround(particles, Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, 1), ground), InputError);
+}
+
+// A small dark drop loses its colour to a phone's 4:2:0 chroma and reads like a shadow: darker by
+// a brightness ratio near 0.55, grey. A soft cast shadow darkens by 0.85. The default shadow
+// threshold must keep the drop and drop the shadow; OpenCV's 0.5 loses the drop.
+TEST(Extraction, ADarkDropIsLiquidAndASoftShadowIsNot) {
+    const TempDirectory temp("viscoscope_extract_shadow_test");
+    const fs::path& dir = temp.path;
+    cv::theRNG().state = 17;
+    constexpr int kEmpty = 5, kCount = 15, kW = 160, kH = 120;
+    const cv::Rect drop(70, 40, 10, 3), shadow(20, 80, 40, 16);
+    const cv::Vec3f backdrop(210, 210, 212), dropColour(100, 110, 125);  // BGR; the drop a grey brown
+    const fs::path video = dir / "drop.mp4";
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), kFps, {kW, kH});
+    ASSERT_TRUE(writer.isOpened());
+    for (int f = 0; f < kCount; ++f) {
+        cv::Mat3f picture(kH, kW, backdrop);
+        if (f >= kEmpty) {
+            picture(drop).setTo(dropColour);
+            picture(shadow) *= 0.85;
+        }
+        cv::Mat3f noise(kH, kW);
+        cv::randn(noise, cv::Scalar::all(0), cv::Scalar::all(1.5));
+        picture += noise;
+        cv::Mat3b out;
+        picture.convertTo(out, CV_8UC3);
+        writer.write(out);
+    }
+    writer.release();
+
+    ExtractionOptions options;
+    options.backgroundFrames = kEmpty;
+    auto shares = [&](double shadowThreshold, const std::string& name) {
+        options.shadowThreshold = shadowThreshold;
+        const ReferenceManifest manifest = extractSilhouettes(video, options, dir / name);
+        double dropShare = 0, shadowShare = 0;
+        for (int f = kEmpty; f < kCount; ++f) {
+            dropShare += cv::countNonZero(manifest.mask(f)(drop)) / double(drop.area() * (kCount - kEmpty));
+            shadowShare += cv::countNonZero(manifest.mask(f)(shadow)) / double(shadow.area() * (kCount - kEmpty));
+        }
+        std::printf("[ figures  ] shadow threshold %.2f: %.3f of the drop and %.3f of the shadow extracted\n",
+                    shadowThreshold, dropShare, shadowShare);
+        return std::array<double, 2>{dropShare, shadowShare};
+    };
+    const auto [dropKept, shadowKept] = shares(ExtractionOptions{}.shadowThreshold, "default");
+    EXPECT_GT(dropKept, 0.8);
+    EXPECT_LT(shadowKept, 0.02);
+    const auto [dropAtHalf, shadowAtHalf] = shares(0.5, "opencv_default");
+    EXPECT_LT(dropAtHalf, 0.5);  // the case the default is for
+    EXPECT_LT(shadowAtHalf, 0.02);
 }

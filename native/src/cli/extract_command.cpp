@@ -94,6 +94,9 @@ Command addExtractCommand(CLI::App& app) {
     sub->add_option("--open", o.openKernel, "Opening kernel diameter, px (0 = none)")->capture_default_str();
     sub->add_option("--min-blob", o.minBlobPixels, "Drop blobs smaller than this many pixels")->capture_default_str();
     sub->add_option("--threshold", o.threshold, "Mask = MOG2 output > T (shadows are 127)")->capture_default_str();
+    sub->add_option("--shadow-threshold", o.shadowThreshold,
+                    "Darker than the background by a brightness ratio in [T, 1], colour unchanged: shadow")
+        ->capture_default_str();
     sub->add_option("--edge-coverage", o.edgeCoverage, "Drop outline pixels the liquid covers less than this share of (0 = off)")
         ->capture_default_str();
     sub->add_option("--var-threshold", o.varianceThreshold, "MOG2 variance threshold")->capture_default_str();

@@ -31,6 +31,7 @@ public:
           closeKernel_(ellipticKernel(options.closeKernel)),
           openKernel_(ellipticKernel(options.openKernel)) {
         subtractor_->setVarMin(options.minimumVariance);
+        subtractor_->setShadowThreshold(options.shadowThreshold);
     }
 
     void learnFrame(const cv::Mat& frame) {
@@ -233,6 +234,7 @@ void validateOptions(const ExtractionOptions& o) {
     if (o.step < 1) throw InputError("--step must be ≥ 1");
     if (!o.cleanPlate && o.backgroundFrames < 1) throw InputError("--background-frames must be ≥ 1 without a clean plate");
     if (o.threshold < 0 || o.threshold > 254) throw InputError("--threshold must be in [0, 254]");
+    if (!(o.shadowThreshold > 0 && o.shadowThreshold <= 1)) throw InputError("--shadow-threshold must be in (0, 1]");
     if (!(o.edgeCoverage >= 0 && o.edgeCoverage < 1)) throw InputError("--edge-coverage must be in [0, 1)");
     if (o.closeKernel < 0 || o.openKernel < 0) throw InputError("--close/--open kernel sizes must be ≥ 0");
     if (o.minBlobPixels < 0) throw InputError("--min-blob must be ≥ 0");
@@ -298,6 +300,7 @@ nlohmann::json parametersJson(const ExtractionOptions& o) {
             {"mog2_variance_threshold", o.varianceThreshold},
             {"mog2_minimum_variance", o.minimumVariance},
             {"mog2_detect_shadows", true},
+            {"mog2_shadow_threshold", o.shadowThreshold},
             {"compensate_gain", o.compensateGain},
             {"threshold", o.threshold},
             {"edge_coverage", o.edgeCoverage},
@@ -376,7 +379,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
     if (!doc.is_object()) throw InputError(origin + ": must be an object");
     static const std::vector<std::string> known{
         "first", "last", "step", "fps", "background_frames", "clean_plate", "exclude_mask", "exclude_polygons",
-        "weights", "mog2_variance_threshold", "mog2_minimum_variance", "compensate_gain", "threshold",
+        "weights", "mog2_variance_threshold", "mog2_minimum_variance", "compensate_gain", "threshold", "mog2_shadow_threshold",
         "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
     for (const auto& [name, value] : doc.items())
         if (std::find(known.begin(), known.end(), name) == known.end())
@@ -409,6 +412,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
         o.compensateGain = doc["compensate_gain"].get<bool>();
     }
     o.threshold = in.integer("threshold", o.threshold);
+    o.shadowThreshold = in.number("mog2_shadow_threshold", o.shadowThreshold);
     o.edgeCoverage = in.number("edge_coverage", o.edgeCoverage);
     o.closeKernel = in.integer("close_kernel_px", o.closeKernel);
     o.openKernel = in.integer("open_kernel_px", o.openKernel);
