@@ -59,7 +59,7 @@ bool allZero(const std::vector<double>& values) {
 nlohmann::json referenceSource(const Job& job) {
     if (!job.video) return nullptr;
     nlohmann::json source = {{"video", fileStamp(*job.video)},
-                             {"extraction", job.document.value("extraction", nlohmann::json())}};
+                             {"extraction", extractionParameters(job.extraction)}};
     if (job.extraction.cleanPlate) source["clean_plate"] = fileStamp(*job.extraction.cleanPlate);
     if (job.extraction.excludeMask) source["exclude_mask"] = fileStamp(*job.extraction.excludeMask);
     return source;

@@ -175,7 +175,8 @@ struct Observation {
 // referenceSource(job), kept beside it as source.json, is unchanged.
 void prepareReference(Job& job, const std::filesystem::path& outDir, const std::atomic<bool>* cancel = nullptr);
 // What a video reference is extracted from: the video, clean plate and exclusion mask files (size,
-// time written) and the job's extraction settings; null without a video.
+// time written) and the job's extraction settings with the engine's defaults filled in, so that
+// silhouettes from an engine with other defaults are not reused; null without a video.
 nlohmann::json referenceSource(const Job& job);
 
 // Loads the reference (checking image size against the camera and that frames remain) and maps

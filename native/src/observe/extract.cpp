@@ -284,33 +284,6 @@ void learnBackground(SilhouetteExtractor& extractor, const fs::path& source, con
     }
 }
 
-nlohmann::json parametersJson(const ExtractionOptions& o) {
-    nlohmann::json polygons = nlohmann::json::array();
-    for (const auto& polygon : o.excludePolygons) {
-        nlohmann::json points = nlohmann::json::array();
-        for (const cv::Point2d& p : polygon) points.push_back({p.x, p.y});
-        polygons.push_back(points);
-    }
-    return {{"first", o.first},
-            {"last", o.last},
-            {"step", o.step},
-            {"background", o.cleanPlate ? "clean_plate" : "leading_frames"},
-            {"background_frames", o.cleanPlate ? 0 : o.backgroundFrames},
-            {"clean_plate", o.cleanPlate ? fs::absolute(*o.cleanPlate).string() : ""},
-            {"mog2_variance_threshold", o.varianceThreshold},
-            {"mog2_minimum_variance", o.minimumVariance},
-            {"mog2_detect_shadows", true},
-            {"mog2_shadow_threshold", o.shadowThreshold},
-            {"compensate_gain", o.compensateGain},
-            {"threshold", o.threshold},
-            {"edge_coverage", o.edgeCoverage},
-            {"close_kernel_px", o.closeKernel},
-            {"open_kernel_px", o.openKernel},
-            {"min_blob_px", o.minBlobPixels},
-            {"exclude_mask", o.excludeMask ? fs::absolute(*o.excludeMask).string() : ""},
-            {"exclude_polygons", polygons},
-            {"weights", o.weights}};
-}
 
 // One field of a job's "extraction" object, typed.
 struct OptionReader {
@@ -374,6 +347,34 @@ void writeManifest(const ReferenceManifest& m, const fs::path& file) {
 }
 
 }  // namespace
+
+nlohmann::json extractionParameters(const ExtractionOptions& o) {
+    nlohmann::json polygons = nlohmann::json::array();
+    for (const auto& polygon : o.excludePolygons) {
+        nlohmann::json points = nlohmann::json::array();
+        for (const cv::Point2d& p : polygon) points.push_back({p.x, p.y});
+        polygons.push_back(points);
+    }
+    return {{"first", o.first},
+            {"last", o.last},
+            {"step", o.step},
+            {"background", o.cleanPlate ? "clean_plate" : "leading_frames"},
+            {"background_frames", o.cleanPlate ? 0 : o.backgroundFrames},
+            {"clean_plate", o.cleanPlate ? fs::absolute(*o.cleanPlate).string() : ""},
+            {"mog2_variance_threshold", o.varianceThreshold},
+            {"mog2_minimum_variance", o.minimumVariance},
+            {"mog2_detect_shadows", true},
+            {"mog2_shadow_threshold", o.shadowThreshold},
+            {"compensate_gain", o.compensateGain},
+            {"threshold", o.threshold},
+            {"edge_coverage", o.edgeCoverage},
+            {"close_kernel_px", o.closeKernel},
+            {"open_kernel_px", o.openKernel},
+            {"min_blob_px", o.minBlobPixels},
+            {"exclude_mask", o.excludeMask ? fs::absolute(*o.excludeMask).string() : ""},
+            {"exclude_polygons", polygons},
+            {"weights", o.weights}};
+}
 
 ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
     if (!doc.is_object()) throw InputError(origin + ": must be an object");
@@ -465,7 +466,7 @@ ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOpt
     manifest.width = frameSize.width;
     manifest.height = frameSize.height;
     manifest.weights = parseFrameWeights(options.weights, manifest.frames);
-    manifest.parameters = parametersJson(options);
+    manifest.parameters = extractionParameters(options);
     std::vector<std::string> outputs{"masks", "preview.png"};
     if (!excluded.empty()) {
         cv::imwrite(output.staged("exclude.png").string(), excluded);

@@ -117,10 +117,13 @@ ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
 // references made by other means than `extract`, such as synthetic ones in tests and benchmarks.
 void saveReferenceManifest(const ReferenceManifest& manifest, const std::filesystem::path& directory);
 
+// Every option as manifest.json's "parameters" records it, defaults included: what identify compares
+// to tell whether silhouettes extracted earlier (perhaps by an engine with other defaults) still hold.
+nlohmann::json extractionParameters(const ExtractionOptions& options);
 // ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
 // exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
-// mog2_minimum_variance, compensate_gain, threshold, edge_coverage, close_kernel_px,
+// mog2_minimum_variance, compensate_gain, threshold, mog2_shadow_threshold, edge_coverage, close_kernel_px,
 // open_kernel_px, min_blob_px. Missing names keep their defaults; paths resolve against `baseDir` ("" = none).
 // Unknown names, wrong types, bad values and missing files throw InputError("<origin>.<name>: ...").
 ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin,
