@@ -255,7 +255,8 @@ TEST(ExtractionOptions, ParsedFromAJobsExtractionObject) {
                              {"exclude_polygons", {{{0, 0}, {3, 0}, {0, 3}}}},
                              {"weights", "0-2:0"},   {"mog2_variance_threshold", 9.5},
                              {"mog2_minimum_variance", 20}, {"compensate_gain", false},
-                             {"threshold", 200},     {"close_kernel_px", 7}, {"open_kernel_px", 0}};
+                             {"threshold", 200},     {"close_kernel_px", 7}, {"open_kernel_px", 0},
+                             {"mog2_shadow_threshold", 0.6}};
     const ExtractionOptions o = parseExtractionOptions(doc, "job.json: extraction", dir);
     EXPECT_EQ(o.first, 2);
     EXPECT_EQ(o.last, 9);
@@ -270,6 +271,7 @@ TEST(ExtractionOptions, ParsedFromAJobsExtractionObject) {
     EXPECT_EQ(o.minimumVariance, 20);
     EXPECT_FALSE(o.compensateGain);
     EXPECT_EQ(o.threshold, 200);
+    EXPECT_EQ(o.shadowThreshold, 0.6);
     EXPECT_EQ(o.closeKernel, 7);
     EXPECT_EQ(o.openKernel, 0);
     EXPECT_EQ(parseExtractionOptions(nlohmann::json::object(), "x", dir).threshold, ExtractionOptions().threshold);
@@ -285,6 +287,7 @@ TEST(ExtractionOptions, ParsedFromAJobsExtractionObject) {
     fails({{"treshold", 100}}, "job.json: extraction.treshold: unknown extraction option");
     fails({{"clean_plate", "absent.png"}}, "extraction.clean_plate: " + (dir / "absent.png").string() + " not found");
     fails({{"step", 0}}, "job.json: extraction: --step must be ≥ 1");
+    fails({{"mog2_shadow_threshold", 1.5}}, "job.json: extraction: --shadow-threshold must be in (0, 1]");
     fails({{"weights", "0-3:x"}}, "job.json: extraction:");
     fails({{"threshold", "high"}}, "extraction.threshold: must be an integer");
     fails({{"exclude_polygons", {{1, 2}}}}, "extraction.exclude_polygons");

@@ -284,7 +284,6 @@ void learnBackground(SilhouetteExtractor& extractor, const fs::path& source, con
     }
 }
 
-
 // One field of a job's "extraction" object, typed.
 struct OptionReader {
     const nlohmann::json& doc;
@@ -380,8 +379,8 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
     if (!doc.is_object()) throw InputError(origin + ": must be an object");
     static const std::vector<std::string> known{
         "first", "last", "step", "fps", "background_frames", "clean_plate", "exclude_mask", "exclude_polygons",
-        "weights", "mog2_variance_threshold", "mog2_minimum_variance", "compensate_gain", "threshold", "mog2_shadow_threshold",
-        "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
+        "weights", "mog2_variance_threshold", "mog2_minimum_variance", "mog2_shadow_threshold", "compensate_gain",
+        "threshold", "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
     for (const auto& [name, value] : doc.items())
         if (std::find(known.begin(), known.end(), name) == known.end())
             throw InputError(origin + "." + name + ": unknown extraction option");
