@@ -141,7 +141,8 @@ def main():
     parser.add_argument("--etas", default="1,3,10,30,100,300", help="true viscosities, Pa·s, comma-separated")
     parser.add_argument("--reference-resolution", type=int, default=64, help="synth's resolution")
     parser.add_argument("--resolution", type=int, default=48, help="the identification's resolution")
-    parser.add_argument("--frames", type=int, default=60, help="compared frames after the initial one (at the scene's fps)")
+    parser.add_argument("--frames", type=int, default=60,
+                        help="compared frames after the initial one (at the scene's fps)")
     parser.add_argument("--slow-eta", type=float, default=100,
                         help="above this η the clip is η/slow-eta times longer, compared at that step")
     parser.add_argument("--reference-seed", type=int, default=11)
@@ -164,7 +165,8 @@ def main():
 
     root = pathlib.Path(args.keep) if args.keep else pathlib.Path(tempfile.mkdtemp(prefix="viscoscope_table_"))
     print(f"reference {args.reference_resolution}³ seed {args.reference_seed}, identification {args.resolution}³ "
-          f"seed {args.seed}, {args.frames} compared frames (clips longer above η = {args.slow_eta:g}), {args.width}x{args.height} camera, {args.samples} spp; "
+          f"seed {args.seed}, {args.frames} compared frames (clips longer above η = {args.slow_eta:g}), "
+          f"{args.width}x{args.height} camera, {args.samples} spp; "
           f"work in {root}", flush=True)
     header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'evals':>6} "
               f"{'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")
