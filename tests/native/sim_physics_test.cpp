@@ -229,8 +229,19 @@ TEST(Physics, RotatingViscousBallKeepsAngularMomentum) {
     }
 }
 
-// Nothing blows up across six decades of viscosity on the draining-cup scene.
+// Nothing blows up across six decades of viscosity on the draining-cup scene. A blow-up creates
+// energy, so the test holds the solver to the energy budget of this closed scene: the kinetic
+// energy may never exceed the gravitational energy released since the start (measured: at most
+// 92 % of it, in the water's free fall). A bound on the fastest particle was used before; at 20³
+// the water's sheet spreading on the ground runs up the domain's corners at 3.6–4.9 m/s, twice the
+// free-fall speed, so one particle's speed tells little about stability.
 TEST(Physics, StableFromWaterToTar) {
+    auto sumOverParticles = [](const sim::Simulation& s, auto&& perParticle) {
+        double sum = 0;
+        for (size_t i = 0; i < s.particles().position.size(); ++i)
+            sum += perParticle(s.particles().position[i], s.particles().velocity[i]);
+        return sum;
+    };
     for (double eta : {1e-3, 1.0, 1e3}) {
         json doc = baseScene(eta, 20);
         doc["domain"] = {{"min", {-0.09, -0.09, 0}}, {"max", {0.09, 0.09, 0.18}}, {"resolution", 20}};
@@ -239,12 +250,27 @@ TEST(Physics, StableFromWaterToTar) {
                           {"wall_thickness", 0.006}, {"bottom_thickness", 0.005}, {"hole_radius", 0.018}}};
         doc["liquids"].push_back({{"type", "cup_fill"}, {"cup", 1}, {"volume", 1.7e-4}});
         doc["material"]["surface_tension"] = 0.07;
-        sim::Simulation s(parseScene(doc, "cup"));
-        for (int f = 0; f < 6; ++f) ASSERT_NO_THROW(s.advanceFrame()) << "eta=" << eta;
+        const Scene scene = parseScene(doc, "cup");
+        sim::Simulation s(scene);
+        // Per unit particle mass: all particles weigh the same, and none are added or removed here.
+        const size_t particleCount = s.particles().position.size();
+        auto potential = [&](const Vec3& x, const Vec3&) { return -scene.gravity.dot(x); };
+        const double potential0 = sumOverParticles(s, potential);
+        double worstShare = 0;
+        for (int f = 0; f < 6; ++f) {
+            ASSERT_NO_THROW(s.advanceFrame()) << "eta=" << eta;
+            ASSERT_EQ(s.particles().position.size(), particleCount);
+            const double kinetic = sumOverParticles(s, [](const Vec3&, const Vec3& v) { return 0.5 * v.squaredNorm(); });
+            const double released = potential0 - sumOverParticles(s, potential);
+            ASSERT_TRUE(std::isfinite(kinetic)) << "eta=" << eta;
+            EXPECT_LE(kinetic, released) << "eta=" << eta << ", frame " << f + 1;
+            worstShare = std::max(worstShare, kinetic / released);
+        }
         EXPECT_TRUE(std::isfinite(s.liquidVolume()));
-        EXPECT_LT(maxParticleSpeed(s), 5.0) << "eta=" << eta;  // free fall over the scene is < 2 m/s
         EXPECT_FALSE(s.particles().position.empty());
-        std::printf("cup eta=%g Pa·s: max speed %.3f m/s after 0.2 s\n", eta, maxParticleSpeed(s));
+        std::printf("cup eta=%g Pa·s: kinetic energy at most %.2f of the potential energy released; "
+                    "fastest particle %.3f m/s after 0.2 s\n",
+                    eta, worstShare, maxParticleSpeed(s));
     }
 }
 

@@ -93,6 +93,7 @@ private:
     void seedParticles();
     void emit(double dt);
     void transferToGrid();
+    void computeFaceOpenings();
     void computeFractions();
     void extrapolateVelocity(int layers);
     void applyBodyForces(double dt);

@@ -33,8 +33,10 @@ double cupDistance(const Vec3& x, const CupSolid& c) {
     const double outer = cylinderDistance(x, c.position, outerR, zBottom, zTop);
     // The cavity extends above the rim so that the cup is open at the top.
     const double cavity = cylinderDistance(x, c.position, c.innerRadius, zInner, zTop + outerR);
+    // The hole reaches into the cavity and below the cup: with its ends flush with the bottom's
+    // faces, max() would read 0 (on the surface) across the whole hole at those planes.
     const double hole = c.holeRadius > 0
-                            ? cylinderDistance(x, c.position, c.holeRadius, zBottom - outerR, zInner + 1e-9)
+                            ? cylinderDistance(x, c.position, c.holeRadius, zBottom - outerR, zInner + outerR)
                             : 1e30;
     return std::max({outer, -cavity, -hole});
 }

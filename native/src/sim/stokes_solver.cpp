@@ -85,10 +85,9 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
         const Vec3i ijk = cells.coords(c);
         if (pressure) {
             Row row{{}, 0.0, Row::Pressure, 0, c};
-            for (int a = 0; a < 3; ++a) {
-                add(row, a, faceAt(a, ijk), wc * invDx);
-                add(row, a, faceAt(a, ijk + Vec3i::Unit(a)), -wc * invDx);
-            }
+            for (int a = 0; a < 3; ++a)
+                for (const auto& [face, sign] : {std::pair{faceAt(a, ijk), 1.0}, {faceAt(a, ijk + Vec3i::Unit(a)), -1.0}})
+                    if (face >= 0) add(row, a, face, sign * wc * w.faceOpenArea[a][face] * invDx);
             keep(std::move(row));
         }
         if (stress)

@@ -4,8 +4,8 @@
 // - DecoupledViscositySolver: Batty & Bridson 2008 variational viscosity, then a separate pressure
 //   projection. Kept as the baseline the unified scheme is compared against.
 //
-// Discretization (both schemes): minimize ½|u − u*|²_M + Δt Σ η |D u|²_W subject to W_p ∇·u = 0,
-// where M = ρ W_u. Every weight W is a liquid-and-non-solid volume fraction of the sample's control
+// Discretization (both schemes): minimize ½|u − u*|²_M + Δt Σ η |D u|²_W subject to W_p ∇·(A u) = 0,
+// where M = ρ W_u and A the faces' open (non-solid) area fractions. Every weight W is a liquid-and-non-solid volume fraction of the sample's control
 // volume, all taken from one sub-cell sampling (see VolumeFractions), so they agree with each other.
 #pragma once
 
@@ -26,6 +26,10 @@ struct VolumeFractions {
     std::array<Field, 3> face;    // velocity samples (mass)
     std::array<Field, 3> edge;    // τ_ab samples, indexed by the edge's axis
     std::array<std::vector<char>, 3> solidFace;  // velocity fixed to the solid's (zero) velocity
+    // Non-solid fraction of each face's area: the face's flux in the divergence is A_f u_f Δx², as in
+    // Batty, Bertails & Bridson 2007. A binary open/closed face would quantize an aperture (the
+    // cup's hole) to whole faces, and the drain rate through it with it.
+    std::array<Field, 3> faceOpenArea;
 };
 
 struct StokesProblem {
