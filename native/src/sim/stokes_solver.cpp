@@ -85,9 +85,11 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
         const Vec3i ijk = cells.coords(c);
         if (pressure) {
             Row row{{}, 0.0, Row::Pressure, 0, c};
-            for (int a = 0; a < 3; ++a)
-                for (const auto& [face, sign] : {std::pair{faceAt(a, ijk), 1.0}, {faceAt(a, ijk + Vec3i::Unit(a)), -1.0}})
-                    if (face >= 0) add(row, a, face, sign * wc * w.faceOpenArea[a][face] * invDx);
+            for (int a = 0; a < 3; ++a) {
+                const int low = faceAt(a, ijk), high = faceAt(a, ijk + Vec3i::Unit(a));
+                if (low >= 0) add(row, a, low, wc * w.faceOpenArea[a][low] * invDx);
+                if (high >= 0) add(row, a, high, -wc * w.faceOpenArea[a][high] * invDx);
+            }
             keep(std::move(row));
         }
         if (stress)

@@ -5,8 +5,9 @@
 //   projection. Kept as the baseline the unified scheme is compared against.
 //
 // Discretization (both schemes): minimize ½|u − u*|²_M + Δt Σ η |D u|²_W subject to W_p ∇·(A u) = 0,
-// where M = ρ W_u and A the faces' open (non-solid) area fractions. Every weight W is a liquid-and-non-solid volume fraction of the sample's control
-// volume, all taken from one sub-cell sampling (see VolumeFractions), so they agree with each other.
+// where M = ρ W_u and A holds the faces' open (non-solid) area fractions. Every weight W is a
+// liquid-and-non-solid volume fraction of the sample's control volume, all taken from one sub-cell
+// sampling (see VolumeFractions), so they agree with each other.
 #pragma once
 
 #include "sim/grid.h"
