@@ -8,10 +8,11 @@
 //     min(⌊max_generations / 2⌋, 10), and always ≤ max_generations − 1 so at least one generation
 //     runs at full fidelity (the job's resolution r, every compared frame);
 //   * by default the coarse phase keeps the job's grid and shortens the clip to its first third.
-//     A coarser grid is biased: on the sample scene the cup drains 1.5× too fast at 32³ (see
-//     kCoarseToFineShift), so its optimum sat 25–35 % above the truth, while the first 20 of 60
-//     frames at 48³ put the minimum at the truth (E 0.031 at 9 and 0.032 at 10 Pa·s, truth 10) for
-//     about the cost of all 60 frames at 32³ (17 s against 14 s per evaluation, two at once);
+//     A coarser grid is biased: on the sample scene the cup drained 1.5× too fast at 32³ (1.16×
+//     since faces pass flux through their open area only; see kCoarseToFineShift), so its optimum
+//     sat 25–35 % above the truth, while the first 20 of 60 frames at 48³ put the minimum at the
+//     truth (E 0.031 at 9 and 0.032 at 10 Pa·s, truth 10) for about the cost of all 60 frames at
+//     32³ (17 s against 14 s per evaluation, two at once);
 //   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
 //     (the coarse optimum differs from the full-fidelity one by more than that, so more coarse
 //     generations are wasted),
