@@ -53,12 +53,12 @@ double secondsSince(Clock::time_point t0) {
 // half-cell whose centre is at distance phi from a planar interface.
 double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
 
-// Non-solid fraction of the area of the face centred at `centre` across `axis`, from 4×4 samples
-// of the solid distance on it, each a linear step over the sample spacing like the half-cells'.
-// Faces farther from every solid than their half-diagonal are wholly open or shut.
-double faceOpenArea(const SolidField& solids, const Vec3& centre, int axis, double dx) {
-    const double d = solids.distance(centre);
-    if (std::abs(d) > dx) return d > 0 ? 1.0 : 0.0;
+// Non-solid fraction of the area of the face centred at `centre` across `axis`, whose centre is
+// `centreDistance` from the solids, from 4×4 samples of the solid distance on it, each a linear
+// step over the sample spacing like the half-cells'. Faces farther from every solid than their
+// half-diagonal are wholly open or shut.
+double faceOpenArea(const SolidField& solids, const Vec3& centre, double centreDistance, int axis, double dx) {
+    if (std::abs(centreDistance) > dx) return centreDistance > 0 ? 1.0 : 0.0;
     constexpr int kSamples = 4;
     const double h = dx / kSamples;
     const int b = (axis + 1) % 3, c = (axis + 2) % 3;
@@ -174,9 +174,10 @@ void Simulation::computeFaceOpenings() {
         fractions_.solidFace[a].assign(faces.count(), 1);
         tbb::parallel_for(0, faces.count(), [&](int f) {
             const Vec3 centre = grid_.position(kFace[a], faces.coords(f));
-            if (solids_->distance(centre) <= 0) return;
+            const double distance = solids_->distance(centre);
+            if (distance <= 0) return;
             fractions_.solidFace[a][f] = 0;
-            fractions_.faceOpenArea[a][f] = faceOpenArea(*solids_, centre, a, grid_.dx);
+            fractions_.faceOpenArea[a][f] = faceOpenArea(*solids_, centre, distance, a, grid_.dx);
         });
     }
 }
