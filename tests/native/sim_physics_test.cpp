@@ -255,12 +255,13 @@ TEST(Physics, StableFromWaterToTar) {
         // Per unit particle mass: all particles weigh the same, and none are added or removed here.
         const size_t particleCount = s.particles().position.size();
         auto potential = [&](const Vec3& x, const Vec3&) { return -scene.gravity.dot(x); };
+        auto kineticEnergy = [](const Vec3&, const Vec3& v) { return 0.5 * v.squaredNorm(); };
         const double potential0 = sumOverParticles(s, potential);
         double worstShare = 0;
         for (int f = 0; f < 6; ++f) {
             ASSERT_NO_THROW(s.advanceFrame()) << "eta=" << eta;
             ASSERT_EQ(s.particles().position.size(), particleCount);
-            const double kinetic = sumOverParticles(s, [](const Vec3&, const Vec3& v) { return 0.5 * v.squaredNorm(); });
+            const double kinetic = sumOverParticles(s, kineticEnergy);
             const double released = potential0 - sumOverParticles(s, potential);
             ASSERT_TRUE(std::isfinite(kinetic)) << "eta=" << eta;
             EXPECT_LE(kinetic, released) << "eta=" << eta << ", frame " << f + 1;
