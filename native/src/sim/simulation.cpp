@@ -53,6 +53,11 @@ double secondsSince(Clock::time_point t0) {
 // half-cell whose centre is at distance phi from a planar interface.
 double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
 
+// The non-solid share of a sample of size h (a half-cell, or a patch of a face) centred at x.
+double nonSolidFraction(const SolidField& solids, const Vec3& x, double h) {
+    return 1.0 - insideFraction(solids.distance(x), h);
+}
+
 // Non-solid fraction of the area of the face centred at `centre` across `axis`, whose centre is
 // `centreDistance` from the solids, from 4×4 samples of the solid distance on it, each a linear
 // step over the sample spacing like the half-cells'. Faces farther from every solid than their
@@ -68,7 +73,7 @@ double faceOpenArea(const SolidField& solids, const Vec3& centre, double centreD
             Vec3 x = centre;
             x[b] += (i + 0.5 - 0.5 * kSamples) * h;
             x[c] += (j + 0.5 - 0.5 * kSamples) * h;
-            open += 1.0 - insideFraction(solids.distance(x), h);
+            open += nonSolidFraction(solids, x, h);
         }
     return open / (kSamples * kSamples);
 }
@@ -145,8 +150,7 @@ Simulation::Simulation(const Scene& scene)
         for (int j = 0; j < fine[1]; ++j)
             for (int i = 0; i < fine[0]; ++i) {
                 const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
-                fineSolidFraction_[i + fine[0] * (j + size_t(fine[1]) * k)] =
-                    1.0 - insideFraction(solids_->distance(x), h);
+                fineSolidFraction_[i + fine[0] * (j + size_t(fine[1]) * k)] = nonSolidFraction(*solids_, x, h);
             }
     });
     computeFaceOpenings();
