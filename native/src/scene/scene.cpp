@@ -200,7 +200,8 @@ MaterialModel parseModel(const FieldReader& r) {
 
 // Measured on the sample scene (18 mm hole, η = 8 Pa·s, 2 s, seed 1): the cup drained 46.4 cm³
 // with the hole 3.2 cells across (32³), 63.5 at 3.6, 44.3 at 4.0, 38.3 at 4.8 and 39.9 at 6.4.
-// (Before faces passed flux through their open area only: 60.0, 68.9, 43.8, 39.7 and 40.0.)
+// (Before faces passed flux through their open area only: 60.0, 68.9, 43.8, 39.7 and 40.0. With
+// CFL 2 instead of 1: 46.5, 63.7, 44.3, 38.3 and 39.9.)
 constexpr double kMinHoleCells = 4.5;
 
 std::vector<std::string> resolutionWarnings(const Scene& scene) {
