@@ -631,10 +631,12 @@ double Simulation::stableTimeStep() const {
         // it, which Galusinski & Vigneaux (2008) fold in as ½(τ_η + √(τ_η² + 4 τ_c²)) with
         // τ_η = C η̄ Δx / σ, η̄ the mean viscosity of the two sides. At honey viscosities the
         // capillary limit then no longer binds, and as η → 0 it returns to Brackbill's.
-        // η̄ = η/2 against the air, with η the smallest in the liquid (shear-thinning laws vary it).
+        // η̄ = η/2 against the air, with η the smallest in the liquid: only shear-dependent laws
+        // vary it from cell to cell, so only they need the sweep.
         double eta = scene_.material.viscosity;
-        for (int c = 0; c < cellViscosity_.lattice.count(); ++c)
-            if (fractions_.cell[c] >= kMinWeight) eta = std::min(eta, cellViscosity_[c]);
+        if (material_->shearDependent())
+            for (int c = 0; c < cellViscosity_.lattice.count(); ++c)
+                if (fractions_.cell[c] >= kMinWeight) eta = std::min(eta, cellViscosity_[c]);
         const double capillary = std::sqrt(scene_.material.density * dx * dx * dx / (4 * M_PI * sigma));
         const double viscous = kViscousCapillaryConstant * 0.5 * eta * dx / sigma;
         dt = std::min(dt, 0.5 * (viscous + std::sqrt(viscous * viscous + 4 * capillary * capillary)));
