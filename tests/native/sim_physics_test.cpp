@@ -296,14 +296,18 @@ double percentileRadius(const sim::Particles& p, const Vec3& axisPoint, double f
 // H = 4V / (3π r_N²). That is an intermediate asymptotic: a released column takes until r ≫ r₀ to
 // forget its shape, so a fit on the slump measures the transient, not the law. The current
 // therefore starts as the similarity solution at t_i (Stokes flow adjusts its velocity at once)
-// and is fitted against absolute time. The front is read from the particles at a volume fraction
+// and is fitted against absolute time. The law is also the thin-film (lubrication) limit, H ≪ r:
+// started at t_i = 1 s (H/r = 0.36) the current lagged the law by 1.5 % at t = 2 s on 48 and on
+// 96 cells alike (physics, not the grid) and caught up over the next 10 s, which alone read as a
+// 4–5 % exponent error. The full check therefore starts at t_i = 4 s (H/r = 0.21); the CI one at
+// 1 s, to keep more cells across its coarser film. The front is read from the particles at a volume fraction
 // (the 95th percentile of radius lies where the film is still ~½H thick, not in the sub-cell tip):
 // for this profile the volume beyond ξ = r/r_N is (1 − ξ²)^{4/3}, so r_95 = r_N √(1 − 0.05^{3/4}).
 TEST(Physics, HuppertViscousGravityCurrent) {
     const bool full = fullVerification();
     const double rho = 1400, eta = 50, g = 9.81, volume = 7.85e-5;
     const double scale = std::pow(rho * g * std::pow(volume, 3) / (3 * eta), 1.0 / 8);
-    const double tStart = 1.0, tEnd = full ? 16.0 : 6.0;
+    const double tStart = full ? 4.0 : 1.0, tEnd = full ? 16.0 : 6.0;
     const double rStart = 0.894 * scale * std::pow(tStart, 1.0 / 8);
     const double hStart = 4 * volume / (3 * M_PI * rStart * rStart);
     json doc = baseScene(eta, full ? 96 : 48);
@@ -328,8 +332,12 @@ TEST(Physics, HuppertViscousGravityCurrent) {
     // over the volume, dominated by the resolved bulk. The 95th percentile: the volume beyond
     // ξ = r/r_N is (1 − ξ²)^{4/3}, so r_95 = r_N √(1 − 0.05^{3/4}); it reads the thin front, which
     // a late, thin current resolves with only a cell or two, so it is printed, not asserted.
+    // The second moment of the grid's liquid volume fractions is printed beside them: particles
+    // count as volume only while they stay evenly spread, and in the CI film they drift outwards
+    // against the grid's liquid (at t = 6 s, 2 % sparser than it inside r_N/2 and 2.4 % denser at
+    // 0.7–0.85 r_N; the two radii then differ by 0.6 %).
     const double frontFraction = std::sqrt(1 - std::pow(0.05, 0.75));
-    std::vector<double> times, momentRadii, frontRadii;
+    std::vector<double> times, momentRadii, frontRadii, gridMomentRadii;
     while (s.time() + tStart < tEnd - 1e-9) {
         s.advanceFrame();
         const double t = s.time() + tStart;
@@ -340,6 +348,14 @@ TEST(Physics, HuppertViscousGravityCurrent) {
         times.push_back(t);
         momentRadii.push_back(std::sqrt(7.0 / 3.0 * r2 / s.particles().position.size()));
         frontRadii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.95) / frontFraction);
+        const auto& fractions = s.fractions().cell;
+        double gridR2 = 0, gridVolume = 0;
+        for (int c = 0; c < fractions.lattice.count(); ++c) {
+            const Vec3 x = s.grid().position(sim::kCellCentre, fractions.lattice.coords(c));
+            gridR2 += fractions[c] * (x.x() * x.x() + x.y() * x.y());
+            gridVolume += fractions[c];
+        }
+        gridMomentRadii.push_back(std::sqrt(7.0 / 3.0 * gridR2 / gridVolume));
     }
     // Least squares ln r = β ln t + c for the exponent; the prefactor is the mean of r_N / (…)^{1/8} t^{1/8}.
     auto fit = [&](const std::vector<double>& radii) {
@@ -354,16 +370,18 @@ TEST(Physics, HuppertViscousGravityCurrent) {
     };
     const auto [exponent, prefactor] = fit(momentRadii);
     const auto [frontExponent, frontPrefactor] = fit(frontRadii);
+    const auto [gridExponent, gridPrefactor] = fit(gridMomentRadii);
     std::printf("Huppert (%s, %d cells across, t %.0f–%.0f s, H from %.1f to %.1f cells): second moment: exponent %.4f "
                 "(theory 0.125, error %.1f%%), prefactor %.4f (theory 0.894, error %.1f%%); 95th percentile: "
-                "exponent %.4f (%.1f%%), prefactor %.4f (%.1f%%)\n",
+                "exponent %.4f (%.1f%%), prefactor %.4f (%.1f%%); grid volume second moment: exponent %.4f (%.1f%%), "
+                "prefactor %.4f (%.1f%%)\n",
                 full ? "full" : "CI", s.grid().cells.x(), tStart, tEnd, hStart / s.grid().dx,
                 4 * volume / (3 * M_PI * std::pow(momentRadii.back(), 2)) / s.grid().dx, exponent,
                 100 * (exponent / 0.125 - 1), prefactor, 100 * (prefactor / 0.894 - 1), frontExponent,
-                100 * (frontExponent / 0.125 - 1), frontPrefactor, 100 * (frontPrefactor / 0.894 - 1));
-    // Goal: exponent within 3 %, prefactor within 5 %. The exponent is not met yet (the radius stays
-    // within 1.5 % of theory throughout, but lags early and catches up late, and a 1 % drift in r over
-    // this window is a 4–5 % exponent error); CI guards against regressions with 10 %.
+                100 * (frontExponent / 0.125 - 1), frontPrefactor, 100 * (frontPrefactor / 0.894 - 1), gridExponent,
+                100 * (gridExponent / 0.125 - 1), gridPrefactor, 100 * (gridPrefactor / 0.894 - 1));
+    // Goal: exponent within 3 %, prefactor within 5 %, asserted on the particles' second moment. The
+    // coarse CI film (3–5 cells) guards against regressions with 10 %.
     EXPECT_NEAR(exponent, 0.125, (full ? 0.03 : 0.10) * 0.125);
     EXPECT_NEAR(prefactor, 0.894, 0.05 * 0.894);
 }

@@ -86,7 +86,8 @@ public:
     double time() const { return time_; }
     int frame() const { return frame_; }
     double liquidVolume() const;
-    Vec3 velocityAt(const Vec3& x) const;  // trilinear on the staggered grid
+    // Trilinear on the staggered grid; beyond the domain's walls, their ghosts (wallGhostRatio).
+    Vec3 velocityAt(const Vec3& x) const;
     double solidDistance(const Vec3& x) const;
 
 private:
@@ -96,6 +97,7 @@ private:
     void computeFaceOpenings();
     void computeFractions();
     void extrapolateVelocity(int layers);
+    double velocityComponentAt(int axis, const Vec3& x, Vec3* gradient) const;
     void applyBodyForces(double dt);
     void applySurfaceTension(double dt);
     void updateViscosity(const StokesProblem& problem);

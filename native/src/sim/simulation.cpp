@@ -578,23 +578,41 @@ void Simulation::transferToParticles() {
     tbb::parallel_for(size_t(0), n, [&](size_t p) {
         const Vec3& x = particles_.position[p];
         for (int a = 0; a < 3; ++a) {
-            const Field& u = state_.velocity[a];
-            double v = 0, wsum = 0;
-            Vec3 grad = Vec3::Zero();
-            forEachStencilSample(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw) {
-                v += w * u[f];
-                wsum += w;
-                grad += dw * u[f];
-            });
-            particles_.velocity[p][a] = wsum > 0 ? v / wsum : 0;
-            particles_.affine[p].row(a) = grad.transpose();
+            Vec3 gradient;
+            particles_.velocity[p][a] = velocityComponentAt(a, x, &gradient);
+            particles_.affine[p].row(a) = gradient.transpose();
         }
     });
 }
 
+// A sample beyond the domain's boundary is the wall ghost (wallGhostRatio) of the boundary sample it
+// clamps to, against whatever solid lies there. A ground on the domain's floor then holds particles
+// in the half cell above it to the solve's no-slip profile, whose mean over the face's cell is the
+// face velocity; the clamped constant let them slip, and a spreading current ran ahead of its
+// liquid (CI Huppert exponent +7.2 % → +3.8 %). Solid faces inside the domain keep their zero:
+// ghosts there as well (least-squares through the liquid neighbours) carried 7 % less than the face
+// fluxes through the sample cup's hole at 48³ and 64³, against 3 % less with the zero.
+double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) const {
+    const Field& u = state_.velocity[a];
+    double value = 0;
+    if (gradient) gradient->setZero();
+    forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, const Vec3i& unclamped) {
+        double sample = u[f];
+        for (int b = 0; b < 3 && !fractions_.solidFace[a][f]; ++b)
+            if (!grid_.periodic[b] && (unclamped[b] < 0 || unclamped[b] >= u.lattice.size[b])) {
+                sample *= wallGhostRatio(solids_->distance(grid_.position(kFace[a], u.lattice.coords(f))),
+                                         solids_->distance(grid_.position(kFace[a], unclamped)),
+                                         scene_.material.slipLength, grid_.dx);
+                break;
+            }
+        value += w * sample;
+        if (gradient) *gradient += dw * sample;
+    });
+    return value;
+}
+
 Vec3 Simulation::velocityAt(const Vec3& x) const {
-    return {interpolate(grid_, state_.velocity[0], x), interpolate(grid_, state_.velocity[1], x),
-            interpolate(grid_, state_.velocity[2], x)};
+    return {velocityComponentAt(0, x, nullptr), velocityComponentAt(1, x, nullptr), velocityComponentAt(2, x, nullptr)};
 }
 
 // Ralston's third-order Runge–Kutta through the grid velocity, then out of solids.

@@ -53,10 +53,8 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
         if (!row.terms.empty()) rows.push_back(std::move(row));
     };
     // A velocity difference k (u(hi) − u(lo)) in a stress row. Where one of the two faces is solid,
-    // its velocity is a ghost value that puts the wall condition where the wall really is (not at
-    // the solid face): u_ghost = u_fluid (d_ghost + λ)/(d_fluid + λ), the linear profile through a
-    // Navier slip condition u = λ ∂u/∂n at the wall (λ = 0: no-slip). This keeps cut-cell walls
-    // consistent with the cut-cell weights.
+    // its velocity is the wall's ghost value (wallGhostRatio), which keeps cut-cell walls consistent
+    // with the cut-cell weights.
     auto addDifference = [&](Row& row, int axis, const Vec3i& lo, const Vec3i& hi, double k, double slip) {
         const int fLo = faceAt(axis, lo), fHi = faceAt(axis, hi);
         if (fLo >= 0 && fHi >= 0) {
@@ -68,8 +66,8 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
         const Vec3i& fluid = fLo >= 0 ? lo : hi;
         const Vec3i& ghost = fLo >= 0 ? hi : lo;
         const double dFluid = std::max(p.solidDistance(g.position(kFace[axis], fluid)), 0.1 * g.dx);
-        const double dGhost = std::min(p.solidDistance(g.position(kFace[axis], ghost)), 0.0);
-        const double ratio = (dGhost + slip) / (dFluid + slip);
+        const double ratio =
+            wallGhostRatio(dFluid, p.solidDistance(g.position(kFace[axis], ghost)), slip, g.dx);
         // With slip the wall itself dissipates, (η/λ) u_wall² per area. The edge's control volume
         // only covers the liquid side (w ≈ d_fluid/Δx), which leaves the ghost difference that
         // energy short by d_fluid/(d_fluid + λ); scaling the term by √(1 + λ/d_fluid) restores the

@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <array>
 #include <functional>
 #include <memory>
@@ -85,6 +86,16 @@ std::unique_ptr<PressureViscositySolver> makeSolver(bool unified);
 // D_aa from the cell's own difference, D_ab as the mean over the four edges around the cell.
 // Cells without liquid get 0.
 Field cellShearRates(const StokesProblem& problem, const std::array<Field, 3>& velocity);
+
+// The ghost value of a velocity sample inside a wall, as a multiple of the liquid sample beside it:
+// the linear profile through the Navier slip condition u = λ ∂u/∂n at the wall (λ = 0: no-slip),
+// from the two samples' signed distances to the solid (positive outside). This puts the wall
+// condition where the wall really is, not at the solid sample. The solve's stress rows use it, and
+// so does the particles' velocity interpolation beyond the domain's boundary.
+inline double wallGhostRatio(double liquidDistance, double ghostDistance, double slipLength, double dx) {
+    const double liquid = std::max(liquidDistance, 0.1 * dx), ghost = std::min(ghostDistance, 0.0);
+    return (ghost + slipLength) / (liquid + slipLength);
+}
 
 // Weight below which a control volume holds no liquid and its sample is not an unknown.
 inline constexpr double kMinWeight = 1e-3;
