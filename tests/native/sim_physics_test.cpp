@@ -204,7 +204,11 @@ TEST(Physics, NavierSlipFilmMatchesItsProfile) {
 }
 
 // 3. A ball in rigid rotation without gravity: rigid motion is in the null space of the viscous
-// stress, so even a very viscous ball keeps its angular momentum.
+// stress, so even a very viscous ball keeps its angular momentum. What a splitting scheme does
+// lose: particles keep their velocity's direction while they turn by θ = ω Δt in a step, and the
+// next projection removes the radial part of that field, leaving rotation at ω cos θ. So the
+// best a step can keep is cos θ, whatever the viscosity (measured the same at η = 0.01, 1 and 100
+// Pa·s); the check holds the solver to within 1 % of that limit.
 TEST(Physics, RotatingViscousBallKeepsAngularMomentum) {
     for (const char* scheme : {"unified", "decoupled"}) {
         json doc = baseScene(100.0, 24);
@@ -221,10 +225,17 @@ TEST(Physics, RotatingViscousBallKeepsAngularMomentum) {
             particles.affine[i] << 0, -omega.z(), 0, omega.z(), 0, 0, 0, 0, 0;
         }
         const double l0 = angularMomentum(s, centre).z();
-        for (int f = 0; f < 3; ++f) s.advanceFrame();
+        double splittingLimit = 1;
+        int steps = 0;
+        for (int f = 0; f < 3; ++f) {
+            const sim::FrameStats frame = s.advanceFrame();
+            splittingLimit *= std::pow(std::cos(omega.z() / scene.fps / frame.steps), frame.steps);
+            steps += frame.steps;
+        }
         const double l1 = angularMomentum(s, centre).z();
-        std::printf("rotating ball (%s): angular momentum kept %.4f after 0.1 s\n", scheme, l1 / l0);
-        EXPECT_GT(l1 / l0, 0.9);
+        std::printf("rotating ball (%s): angular momentum kept %.4f after 0.1 s in %d steps (splitting limit %.4f)\n",
+                    scheme, l1 / l0, steps, splittingLimit);
+        EXPECT_GT(l1 / l0, 0.99 * splittingLimit);
         EXPECT_LT(l1 / l0, 1.02);
     }
 }
