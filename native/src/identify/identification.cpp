@@ -25,6 +25,12 @@
 //     λ = 4, CMA-ES needs more generations to shrink σ than a 10-minute run has (at 32³ σ went
 //     0.8 → 1.0 → 0.55 in 10 generations), so the coarse phase locates the basin and the fine one
 //     searches it, starting from the coarse best rather than from a mean that lags behind;
+//   * in one dimension the first coarse generation scans instead of sampling: its λ points lie evenly
+//     over the initial distribution's ±2σ₀ in log space (within the bounds), and CMA-ES restarts at
+//     the best of them with half their spacing as spread. Sampled, the four points of one draw can
+//     all miss a far optimum, and σ grows too slowly to make up for it within a budget: from the
+//     table's common start (17.3 Pa·s, spread ln 4) the 300 Pa·s reference's search was still
+//     climbing at 111 when its 600 s ran out;
 //   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there.
 //
 // θ*: the best full-fidelity evaluation. A parabola fitted to E (against 1/η; see fitProfile) over
@@ -255,6 +261,16 @@ FieldsSummary writeBestFields(const Job& job, const Observation& obs, const std:
     return summary;
 }
 
+// The first coarse generation's points in one dimension: `count` evenly over ±2σ₀ around the start,
+// clipped to the bounds (see the fidelity policy).
+std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count) {
+    const double lo = std::max(space.lower[0], space.start[0] - 2 * space.spread[0]);
+    const double hi = std::min(space.upper[0], space.start[0] + 2 * space.spread[0]);
+    std::vector<Eigen::VectorXd> points;
+    for (int k = 0; k < count; ++k) points.push_back(Eigen::VectorXd::Constant(1, lo + (hi - lo) * k / (count - 1)));
+    return points;
+}
+
 }  // namespace
 
 LogSearchSpace logSearchSpace(const Job& job) {
@@ -438,6 +454,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const char* fidelity = coarse ? kCoarse : kFull;
         const auto genStart = Clock::now();
         std::vector<Eigen::VectorXd> xs = es.ask();
+        const bool scan = g == 0 && coarse && n == 1 && xs.size() > 1;
+        if (scan) xs = scanPoints(bounds, static_cast<int>(xs.size()));
         // The first full-fidelity generation also scores the restart point, the coarse best, in
         // place of its last sample: with λ = 4 draws of spread ln 1.4, all four can miss the basin
         // the coarse phase found (η = 30: coarse best 28.6, full samples 14.1 / 36.8 / 20.5 / 19.5).
@@ -488,6 +506,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             evaluated.push_back(e);
         }
         es.tell(xs, fitness);
+        if (scan) es.restart(xs[bestK], Eigen::VectorXd::Constant(1, std::max(0.5 * (xs[1][0] - xs[0][0]), 1e-6)));
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         (coarse ? genSecondsCoarse : genSecondsFine).push_back(genSeconds);
         const json* best = bestAt(fidelity);
