@@ -596,15 +596,12 @@ double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) con
     const Field& u = state_.velocity[a];
     double value = 0;
     if (gradient) gradient->setZero();
-    forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, const Vec3i& unclamped) {
+    forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, Vec3i unclamped) {
         double sample = u[f];
-        for (int b = 0; b < 3 && !fractions_.solidFace[a][f]; ++b)
-            if (!grid_.periodic[b] && (unclamped[b] < 0 || unclamped[b] >= u.lattice.size[b])) {
-                sample *= wallGhostRatio(solids_->distance(grid_.position(kFace[a], u.lattice.coords(f))),
-                                         solids_->distance(grid_.position(kFace[a], unclamped)),
-                                         scene_.material.slipLength, grid_.dx);
-                break;
-            }
+        if (!fractions_.solidFace[a][f] && !u.lattice.resolve(unclamped))  // beyond a non-periodic boundary
+            sample *= wallGhostRatio(solids_->distance(grid_.position(kFace[a], u.lattice.coords(f))),
+                                     solids_->distance(grid_.position(kFace[a], unclamped)),
+                                     scene_.material.slipLength, grid_.dx);
         value += w * sample;
         if (gradient) *gradient += dw * sample;
     });
