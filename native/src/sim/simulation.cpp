@@ -598,7 +598,7 @@ double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) con
     if (gradient) gradient->setZero();
     forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, Vec3i unclamped) {
         double sample = u[f];
-        if (!fractions_.solidFace[a][f] && !u.lattice.resolve(unclamped))  // beyond a non-periodic boundary
+        if (!u.lattice.resolve(unclamped) && !fractions_.solidFace[a][f])  // beyond a non-periodic boundary
             sample *= wallGhostRatio(solids_->distance(grid_.position(kFace[a], u.lattice.coords(f))),
                                      solids_->distance(grid_.position(kFace[a], unclamped)),
                                      scene_.material.slipLength, grid_.dx);
