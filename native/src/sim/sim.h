@@ -60,9 +60,11 @@ struct FrameStats {
 // openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian passes (tools::Filter, renormalized
 // by tools::LevelSetTracker). Voxel centres sit at `origin` + (i + ½) voxelSize, so with voxelSize =
 // Δx they coincide with the cell centres.
-// `halfWidth` is the narrow band's half-width in voxels.
+// `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
+// units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
-                                         const Vec3& origin, int smoothingPasses, double halfWidth = 3.0);
+                                         const Vec3& origin, int smoothingPasses, double halfWidth = 3.0,
+                                         double inset = 0.0);
 
 class Simulation {
 public:

@@ -22,6 +22,11 @@ struct SurfaceOptions {
     double voxelsPerCell = 2;      // surface resolution relative to the simulation grid
     double particleRadius = 0.75;  // in simulation cells
     int smoothingPasses = 1;       // Gaussian filter passes
+    // In simulation cells, how far the surface is moved inwards. Spheres of 0.75 cells around
+    // particles 0.5 cells apart reach 0.25–0.49 cells beyond the liquid they fill, so a coarser grid
+    // would draw wider streams and puddles and bias an identification across resolutions; with the
+    // inset the reach is −0.15…+0.10 cells (tests/native/surface_solids_test).
+    double inset = 0.35;
 };
 
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
