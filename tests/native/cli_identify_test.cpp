@@ -202,6 +202,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["area_track_weight"] = -1.0;
         expectBadInput(writeJob(doc, "area_weight.json"), "area_track_weight: must be ≥ 0");
     }
+    {  // an unknown way of comparing silhouettes
+        json doc = job();
+        doc["silhouette_comparison"] = "columns";
+        expectBadInput(writeJob(doc, "comparison.json"), "silhouette_comparison: \"columns\" is not");
+    }
     {  // a measured area track that never leaves 0
         std::ofstream(dir_ / "flat_track.csv") << "time_s,area_px\n0,0\n10,0\n";
         json doc = job();

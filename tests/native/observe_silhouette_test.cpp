@@ -132,6 +132,27 @@ TEST(FastSilhouette, ParticleBlobAgreesWithMeshedLevelSet) {
     EXPECT_GT(bandIou, 0.95);
 }
 
+// Row widths ignore where in a row the liquid lies, and count what each row has too much or too little.
+TEST(Objective, RowWidthsIgnoreSidewaysShifts) {
+    const cv::Size size(8, 4);
+    const auto rowWidths = SilhouetteComparison::kRowWidths;
+    const cv::Mat1b stream = maskFromRects(size, {{2, 0, 2, 4}});
+    const cv::Mat1b shifted = maskFromRects(size, {{5, 0, 2, 4}});  // the same stream 3 pixels to the right
+    EXPECT_DOUBLE_EQ(frameObjective(shifted, stream), 16.0 / (2 * 32));  // eq. 9 counts both edges' pixels
+    EXPECT_DOUBLE_EQ(frameObjective(shifted, stream, {}, rowWidths), 0);
+    // One pixel wider in each of the bottom two rows, and one row split into two pieces of the same width.
+    const cv::Mat1b wider = maskFromRects(size, {{5, 0, 2, 2}, {4, 2, 3, 2}});
+    EXPECT_DOUBLE_EQ(frameObjective(wider, stream, {}, rowWidths), 2.0 / (2 * 32));
+    const cv::Mat1b split = maskFromRects(size, {{2, 0, 2, 3}, {0, 3, 1, 1}, {7, 3, 1, 1}});
+    EXPECT_DOUBLE_EQ(frameObjective(split, stream, {}, rowWidths), 0);
+    // Excluded pixels count in neither width.
+    cv::Mat1b compared(size, uchar(255));
+    compared.col(2).setTo(0);  // the reference stream is 1 pixel wide there, the wider one 2 or 3
+    EXPECT_DOUBLE_EQ(frameObjective(wider, stream, compared, rowWidths), 6.0 / (2 * 32));
+    EXPECT_EQ(parseSilhouetteComparison("row_widths", "job"), rowWidths);
+    EXPECT_THROW(parseSilhouetteComparison("rows", "job"), InputError);
+}
+
 TEST(Objective, FollowsEquationNine) {
     const cv::Size size(4, 4);
     const cv::Mat1b simulated = maskFromRects(size, {{0, 0, 2, 4}});  // left half

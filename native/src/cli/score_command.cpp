@@ -19,7 +19,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct ScoreArguments {
-    std::string camera, reference, sim, outDir, progress = "text";
+    std::string camera, reference, sim, outDir, progress = "text", comparison = "row_widths";
     int simFirst = 0;
     bool fast = false;
 };
@@ -106,6 +106,7 @@ int runScore(const ScoreArguments& args) {
                          "x" + std::to_string(reference.height));
     if (!fs::is_directory(args.sim)) throw InputError(args.sim + ": simulation folder not found");
     const cv::Mat1b compared = reference.comparedPixels();
+    const SilhouetteComparison comparison = parseSilhouetteComparison(args.comparison, "--comparison");
     fs::create_directories(args.outDir);
     fs::remove(fs::path(args.outDir) / "score.json");
 
@@ -123,7 +124,7 @@ int runScore(const ScoreArguments& args) {
             const fs::path simFile = simulationFrame(args.sim, args.simFirst + j);
             const cv::Mat1b simulated = simulatedSilhouette(simFile, camera, args.fast, args.camera);
             const cv::Mat1b observed = reference.mask(j);
-            const double frameE = frameObjective(simulated, observed, compared);
+            const double frameE = frameObjective(simulated, observed, compared, comparison);
             objective += reference.weights[j] * frameE;
             entry["sim_file"] = simFile.string();
             entry["E_f"] = frameE;
@@ -135,7 +136,7 @@ int runScore(const ScoreArguments& args) {
         progress.report({{"event", "progress"}, {"stage", "score"}, {"done", j + 1}, {"total", total}});
     }
     const nlohmann::json score{{"format", "viscoscope.score"}, {"version", 1},
-                               {"silhouette", args.fast ? "fast" : "exact"},
+                               {"silhouette", args.fast ? "fast" : "exact"}, {"comparison", args.comparison},
                                {"camera", args.camera},       {"reference", args.reference},
                                {"sim", args.sim},             {"pixels", reference.width * reference.height},
                                {"E", objective},              {"frames", frames}};
@@ -157,6 +158,10 @@ Command addScoreCommand(CLI::App& app) {
         ->capture_default_str();
     sub->add_option("--out", args->outDir, "Output folder (score.json, diff_%05d.png)")->required();
     sub->add_flag("--fast", args->fast, "Approximate silhouettes by splatting the level set's inner band");
+    sub->add_option("--comparison", args->comparison,
+                    "E_f from the disagreeing pixels (eq. 9) or each row's width, as identify's silhouette_comparison")
+        ->check(CLI::IsMember({"pixels", "row_widths"}))
+        ->capture_default_str();
     sub->add_option("--progress", args->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}))
         ->capture_default_str();

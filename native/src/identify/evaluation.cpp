@@ -213,7 +213,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             surface::clipToSolidExterior(*levelSet, simulation);
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
-            ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared);
+            ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared, job.silhouetteComparison);
             areas[i] = comparedArea(silhouette, obs.compared);
             ev.simulatedPixels += areas[i];
             ev.E += obs.reference.weights[i] * ev.frameE[i];

@@ -181,6 +181,8 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": silhouette_method: expected \"fast\" or \"exact\"");
         job.exactSilhouettes = *method == "exact";
     }
+    if (const auto comparison = optionalString(doc, "silhouette_comparison", origin))
+        job.silhouetteComparison = parseSilhouetteComparison(*comparison, origin + ": silhouette_comparison");
     if (doc.contains("fidelity") && !doc.at("fidelity").is_null()) {
         const nlohmann::json& f = doc.at("fidelity");
         const std::string where = origin + ": fidelity";

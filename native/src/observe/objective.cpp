@@ -6,6 +6,7 @@
 
 #include <opencv2/core.hpp>
 
+#include <cstdlib>
 
 namespace viscoscope {
 
@@ -37,12 +38,36 @@ long long countPixels(const cv::Mat1b& simulated, const cv::Mat1b& reference, co
 
 }  // namespace
 
-double frameObjective(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
+SilhouetteComparison parseSilhouetteComparison(const std::string& name, const std::string& where) {
+    if (name == "pixels") return SilhouetteComparison::kPixels;
+    if (name == "row_widths") return SilhouetteComparison::kRowWidths;
+    throw InputError(where + ": \"" + name + "\" is not \"pixels\" or \"row_widths\"");
+}
+
+std::string silhouetteComparisonName(SilhouetteComparison comparison) {
+    return comparison == SilhouetteComparison::kPixels ? "pixels" : "row_widths";
+}
+
+double frameObjective(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared,
+                      SilhouetteComparison comparison) {
     requireSameSize(simulated, reference, compared);
-    // Masks are binary, so (g − ĝ)² is 1 exactly where they disagree.
-    const long long disagreeing = countPixels(simulated, reference, compared, [](bool g, bool r) { return g != r; });
     const double pixelCount = static_cast<double>(reference.total());
-    return disagreeing / (2.0 * pixelCount);
+    if (comparison == SilhouetteComparison::kPixels) {
+        // Masks are binary, so (g − ĝ)² is 1 exactly where they disagree.
+        const long long disagreeing = countPixels(simulated, reference, compared, [](bool g, bool r) { return g != r; });
+        return disagreeing / (2.0 * pixelCount);
+    }
+    long long widthDifferences = 0;
+    for (int row = 0; row < reference.rows; ++row) {
+        const uchar* g = simulated.ptr(row);
+        const uchar* gHat = reference.ptr(row);
+        const uchar* c = compared.empty() ? nullptr : compared.ptr(row);
+        long long difference = 0;
+        for (int col = 0; col < reference.cols; ++col)
+            if (c == nullptr || c[col] != 0) difference += (g[col] != 0) - (gHat[col] != 0);
+        widthDifferences += std::abs(difference);
+    }
+    return widthDifferences / (2.0 * pixelCount);
 }
 
 double intersectionOverUnion(const cv::Mat1b& simulated, const cv::Mat1b& reference, const cv::Mat1b& compared) {
