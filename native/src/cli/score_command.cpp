@@ -19,7 +19,8 @@ namespace {
 namespace fs = std::filesystem;
 
 struct ScoreArguments {
-    std::string camera, reference, sim, outDir, progress = "text", comparison = "row_widths";
+    std::string camera, reference, sim, outDir, progress = "text",
+                comparison = silhouetteComparisonName(kDefaultSilhouetteComparison);
     int simFirst = 0;
     bool fast = false;
 };

@@ -149,7 +149,7 @@ struct Job {
     double timeBudget = 0;
     int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
     bool exactSilhouettes = false;  // mesh + fill instead of the fast band splat
-    SilhouetteComparison silhouetteComparison = SilhouetteComparison::kRowWidths;
+    SilhouetteComparison silhouetteComparison = kDefaultSilhouetteComparison;
     FidelitySchedule fidelity;
     nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
 };

@@ -222,6 +222,8 @@ enum class SilhouetteComparison {
     // says nothing of η. Rows should be about level in the world.
     kRowWidths,
 };
+// What `identify` and `score` use unless told otherwise.
+constexpr SilhouetteComparison kDefaultSilhouetteComparison = SilhouetteComparison::kRowWidths;
 // Parses "pixels" / "row_widths"; throws InputError naming `where` otherwise.
 SilhouetteComparison parseSilhouetteComparison(const std::string& name, const std::string& where);
 std::string silhouetteComparisonName(SilhouetteComparison comparison);
