@@ -62,9 +62,10 @@ struct FrameStats {
 // Δx they coincide with the cell centres.
 // `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
 // units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.
+inline constexpr double kDefaultBandHalfWidth = 3.0;
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
-                                         const Vec3& origin, int smoothingPasses, double halfWidth = 3.0,
-                                         double inset = 0.0);
+                                         const Vec3& origin, int smoothingPasses,
+                                         double halfWidth = kDefaultBandHalfWidth, double inset = 0.0);
 
 class Simulation {
 public:

@@ -24,7 +24,8 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
                                        const SurfaceOptions& options) {
     return sim::particleLevelSet(positions, options.particleRadius * cellSize, cellSize / options.voxelsPerCell,
-                                 Eigen::Vector3d::Zero(), options.smoothingPasses, 3.0, options.inset * cellSize);
+                                 Eigen::Vector3d::Zero(), options.smoothingPasses, sim::kDefaultBandHalfWidth,
+                                 options.inset * cellSize);
 }
 
 void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::Simulation& simulation) {
