@@ -232,15 +232,34 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
 
 // A budget far below what the job needs: the coarse phase ends after its first generation, the
 // minimum two full-fidelity generations run, and then the loop stops instead of starting
-// another. A rerun with the same budget evaluates nothing more; without a budget it goes on.
+// another; a warning at the switch says the budget will be overrun and by how much. A rerun with
+// the same budget evaluates nothing more and keeps the warning; without a budget it goes on.
 TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     json doc = jobJson();
     doc["max_generations"] = 40;
     doc["time_budget_s"] = 0.5;
     identify::IdentifyOptions options;
     options.writeFields = false;
+    std::vector<std::string> warned;
+    options.onWarning = [&](const std::string& w) { warned.push_back(w); };
+    std::vector<double> remaining;
+    options.onGeneration = [&](const identify::GenerationReport& r) { remaining.push_back(r.remaining); };
     const fs::path out = dir_ / "budget_out";
     const identify::IdentificationResult result = identify::identify(job(doc), out, options);
+    auto budgetWarnings = [](const json& warnings) {
+        int count = 0;
+        for (const json& w : warnings) count += w.get<std::string>().rfind("time_budget_s:", 0) == 0;
+        return count;
+    };
+    ASSERT_EQ(warned.size(), 1u);
+    EXPECT_EQ(warned[0].rfind("time_budget_s: the 2 full-fidelity generations", 0), 0u) << warned[0];
+    EXPECT_EQ(budgetWarnings(result.document.at("warnings")), 1);
+    // After the switch the estimate covers the full-fidelity generation still to come, not the
+    // budget's spent remainder.
+    ASSERT_EQ(remaining.size(), 3u);
+    EXPECT_GT(remaining[0], 0.0);
+    EXPECT_GT(remaining[1], 0.0);
+    EXPECT_EQ(remaining[2], 0.0);
     std::printf("[ identify ] budget 0.5 s: stop %s after %d generations (%d coarse), %.1f s\n",
                 identify::toString(result.stop), result.generations,
                 result.document.at("coarse_generations").get<int>(), result.seconds);
@@ -250,6 +269,7 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     const identify::IdentificationResult again = identify::identify(job(doc), out, options);
     EXPECT_EQ(again.evaluations, result.evaluations);
     EXPECT_EQ(again.stop, identify::StopReason::TimeBudget);
+    EXPECT_EQ(budgetWarnings(again.document.at("warnings")), 1);
     doc["time_budget_s"] = 0;
     doc["max_generations"] = 5;
     const identify::IdentificationResult more = identify::identify(job(doc), out, options);

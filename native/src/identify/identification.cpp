@@ -131,6 +131,8 @@ constexpr int kCheckpointVersion = 3;
 constexpr const char* kCoarse = "coarse";
 constexpr const char* kFull = "full";
 
+std::string wholeSeconds(double s) { return std::to_string(std::lround(s)); }
+
 int coarseResolution(const Job& job) {
     return std::max(8, static_cast<int>(std::lround(job.fidelity.coarseFactor * job.resolution)));
 }
@@ -537,6 +539,20 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             coarseEnd = done;
         if (coarse && done == coarseEnd) {
             generations.back()["predicted_fine_generation_s"] = fineGenerationSeconds();  // to check it later
+            // The minimum full-fidelity generations run whatever the budget says; when they cannot
+            // fit (η = 300 on a 180-frame clip: 2 × 339 s predicted with 440 s left), say so now
+            // and how long the run will take, instead of a remaining time that runs out early.
+            const double fineMinimum = job.fidelity.minFineGenerations * fineGenerationSeconds();
+            if (job.timeBudget > 0 && elapsedNow() + fineMinimum > job.timeBudget) {
+                const std::string warning =
+                    "time_budget_s: the " + std::to_string(job.fidelity.minFineGenerations) +
+                    " full-fidelity generations every run makes are predicted to take " + wholeSeconds(fineMinimum) +
+                    " s with " + wholeSeconds(std::max(0.0, job.timeBudget - elapsedNow())) + " s of the " +
+                    wholeSeconds(job.timeBudget) + " s budget left; the run will end after about " +
+                    wholeSeconds(elapsedNow() + fineMinimum) + " s (a shorter clip or a coarser grid fits the budget)";
+                generations.back()["warning"] = warning;  // the result gathers it, after a resume too
+                if (options.onWarning) options.onWarning(warning);
+            }
             Eigen::VectorXd start = es.mean();
             if (const json* coarseBest = bestAt(kCoarse))
                 for (int i = 0; i < n; ++i) start[i] = std::log(coarseBest->at("theta")[i].get<double>());
@@ -576,7 +592,12 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             report.remaining = stop ? 0.0
                                     : coarseLeft * mean(genSecondsCoarse) +
                                           (job.maxGenerations - std::max(done, coarseEnd)) * fineGenerationSeconds();
-            if (job.timeBudget > 0) report.remaining = std::min(report.remaining, std::max(0.0, job.timeBudget - report.elapsed));
+            if (job.timeBudget > 0 && !stop) {
+                const int fineLeft = std::max(0, job.fidelity.minFineGenerations - std::max(0, done - coarseEnd));
+                report.remaining = std::min(report.remaining, std::max({0.0, job.timeBudget - report.elapsed,
+                                                                        coarseLeft * mean(genSecondsCoarse) +
+                                                                            fineLeft * fineGenerationSeconds()}));
+            }
             report.resumed = resumedFrom > 0 && done == resumedFrom + 1;
             options.onGeneration(report);
         }
@@ -655,6 +676,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     }
     for (auto& [key, r] : perFidelity.items()) r["mean_seconds"] = r["seconds"].get<double>() / r["evaluations"].get<int>();
 
+    for (const json& g : generations)
+        if (g.contains("warning")) warnings.push_back(g.at("warning"));
     json doc{{"format", "viscoscope.identify_result"},
              {"version", 1},
              {"job", job.file.string()},
