@@ -543,13 +543,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             // fit (η = 300 on a 180-frame clip: 2 × 339 s predicted with 440 s left), say so now
             // and how long the run will take, instead of a remaining time that runs out early.
             const double fineMinimum = job.fidelity.minFineGenerations * fineGenerationSeconds();
-            if (job.timeBudget > 0 && elapsedNow() + fineMinimum > job.timeBudget) {
+            const double elapsed = elapsedNow();
+            if (job.timeBudget > 0 && elapsed + fineMinimum > job.timeBudget) {
                 const std::string warning =
                     "time_budget_s: the " + std::to_string(job.fidelity.minFineGenerations) +
                     " full-fidelity generations every run makes are predicted to take " + wholeSeconds(fineMinimum) +
-                    " s with " + wholeSeconds(std::max(0.0, job.timeBudget - elapsedNow())) + " s of the " +
+                    " s with " + wholeSeconds(std::max(0.0, job.timeBudget - elapsed)) + " s of the " +
                     wholeSeconds(job.timeBudget) + " s budget left; the run will end after about " +
-                    wholeSeconds(elapsedNow() + fineMinimum) + " s (a shorter clip or a coarser grid fits the budget)";
+                    wholeSeconds(elapsed + fineMinimum) + " s (a shorter clip or a coarser grid takes less)";
                 generations.back()["warning"] = warning;  // the result gathers it, after a resume too
                 if (options.onWarning) options.onWarning(warning);
             }
