@@ -13,25 +13,18 @@ import argparse
 import json
 import pathlib
 import statistics
-import struct
 import subprocess
 import sys
 import tempfile
+
+from viscosity_floor import read_particles  # the "VSCP" reader, beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
 def drained_share(particles_file, bottom_z):
     """Share of the particles in a "VSCP" file whose height is below bottom_z."""
-    data = particles_file.read_bytes()
-    if data[:4] != b"VSCP":
-        sys.exit(f"{particles_file}: not a particle file")
-    (count,) = struct.unpack_from("<Q", data, 8)
-    below = 0
-    for n in range(count):
-        z = struct.unpack_from("<f", data, 16 + 24 * n + 8)[0]
-        below += z < bottom_z
-    return below / count if count else float("nan")
+    return float((read_particles(particles_file)[:, 2] < bottom_z).mean())
 
 
 def main():
@@ -87,6 +80,8 @@ def main():
                 print(f"{resolution}³ frame {f}: mean {mean:.4f}, spread {max(shares[f]) / min(shares[f]) - 1:+.1%}")
     for f in frames:
         grids = sorted(means[f])
+        if len(grids) < 2:
+            continue
         ratios = ", ".join(f"{r}/{grids[-1]} {means[f][r] / means[f][grids[-1]]:.3f}" for r in grids[:-1])
         print(f"frame {f}: ratio of means {ratios}")
 
