@@ -57,8 +57,8 @@ struct FrameStats {
 };
 
 // A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
-// openvdb::tools::ParticlesToLevelSet and smoothed by Gaussian passes (tools::Filter, renormalized
-// by tools::LevelSetTracker). Voxel centres sit at `origin` + (i + ½) voxelSize, so with voxelSize =
+// openvdb::tools::ParticlesToLevelSet, renormalized by tools::LevelSetTracker and smoothed by
+// `smoothingPasses` Gaussian passes (tools::Filter). Voxel centres sit at `origin` + (i + ½) voxelSize, so with voxelSize =
 // Δx they coincide with the cell centres.
 // `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
 // units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.

@@ -24,7 +24,7 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
                                        const SurfaceOptions& options) {
     return sim::particleLevelSet(positions, options.particleRadius * cellSize, cellSize / options.voxelsPerCell,
-                                 Eigen::Vector3d::Zero(), options.smoothingPasses, sim::kDefaultBandHalfWidth,
+                                 Eigen::Vector3d::Zero(), /*smoothingPasses=*/ 0, sim::kDefaultBandHalfWidth,
                                  options.inset * cellSize);
 }
 
