@@ -58,8 +58,8 @@ struct FrameStats {
 
 // A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
 // openvdb::tools::ParticlesToLevelSet, renormalized by tools::LevelSetTracker and smoothed by
-// `smoothingPasses` Gaussian passes (tools::Filter). Voxel centres sit at `origin` + (i + ½) voxelSize, so with voxelSize =
-// Δx they coincide with the cell centres.
+// `smoothingPasses` Gaussian passes (tools::Filter). Voxel centres sit at `origin` + (i + ½)
+// voxelSize, so with voxelSize = Δx they coincide with the cell centres.
 // `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
 // units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.
 inline constexpr double kDefaultBandHalfWidth = 3.0;
