@@ -278,6 +278,47 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
+// OUT/fields holds θ*'s hidden fields for every frame. They are the best full-fidelity evaluation's
+// own, kept from the search rather than simulated again, and equal to a fresh simulation of θ*,
+// which the run falls back to when they are missing.
+TEST_F(IdentifyLoop, KeepsTheBestEvaluationsFieldsInsteadOfSimulatingAgain) {
+    json doc = jobJson();
+    doc["max_generations"] = 3;
+    doc["resolution"] = 16;
+    const fs::path out = dir_ / "fields_out";
+    const identify::IdentificationResult result = identify::identify(job(doc), out, {});
+    const json& fields = result.document.at("fields");
+    EXPECT_EQ(fields.at("source"), "the best evaluation's run");
+    EXPECT_EQ(fields.at("frames"), 11);  // frames 0..10
+    EXPECT_FALSE(fs::exists(out / "fields.partial"));
+    int files = 0;
+    for (const auto& entry : fs::directory_iterator(out / "fields")) files += entry.path().extension() == ".vdb";
+    EXPECT_EQ(files, 11);
+    std::ifstream ownerFile(out / "fields" / "evaluation.json");
+    const json owner = json::parse(ownerFile);
+    EXPECT_EQ(owner.at("theta"), json(result.theta));
+    ASSERT_GE(result.document.at("coarse_generations").get<int>(), 1);
+    // Every full-fidelity evaluation wrote fields, and the coarse ones did not.
+    for (const json& e : result.document.at("evaluated"))
+        EXPECT_EQ(e.at("fields_s").get<double>() > 0, e.at("fidelity") == "full") << e.dump();
+
+    fs::rename(out / "fields", dir_ / "kept_fields");
+    const identify::IdentificationResult again = identify::identify(job(doc), out, {});
+    EXPECT_EQ(again.theta, result.theta);
+    EXPECT_EQ(again.document.at("fields").at("source"), "θ* simulated again");
+    for (const char* frame : {"frame_00005.vdb", "frame_00010.vdb"}) {
+        const surface::FrameFields kept = surface::readFrameFields(dir_ / "kept_fields" / frame);
+        const surface::FrameFields fresh = surface::readFrameFields(out / "fields" / frame);
+        EXPECT_EQ(kept.velocity->activeVoxelCount(), fresh.velocity->activeVoxelCount()) << frame;
+        const surface::FieldDifference d = surface::compareFields(fresh, kept);
+        EXPECT_GT(d.samples, 0) << frame;
+        EXPECT_EQ(d.velocityError2, 0.0) << frame;
+        EXPECT_EQ(d.pressureError2, 0.0) << frame;
+    }
+    fs::remove_all(out);
+    fs::remove_all(dir_ / "kept_fields");
+}
+
 // Without a track CSV, E also compares the silhouettes' area over time with the reference's: the
 // track holds each compared reference frame's mask area; weight 0 turns it off.
 TEST_F(IdentifyLoop, TheReferenceAreaIsATrackUnlessTurnedOff) {

@@ -95,7 +95,7 @@ Command addIdentifyCommand(CLI::App& app) {
         ->capture_default_str();
     sub->add_option("--threads", args->threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
     sub->add_flag("--no-plots", args->noPlots, "Do not draw convergence.png / landscape.png");
-    sub->add_flag("--no-fields", args->noFields, "Do not re-simulate θ* to write fields/frame_*.vdb");
+    sub->add_flag("--no-fields", args->noFields, "Do not write θ*'s fields/frame_*.vdb (full-fidelity evaluations then write nothing to disk)");
     return {sub, [args] { return runIdentify(*args); }};
 }
 

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 
 namespace viscoscope::identify {
@@ -188,47 +189,89 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 }
 
 Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
-                    const std::atomic<bool>* cancel) {
-    (void)cancel;  // an evaluation always finishes; the loop checks cancel between generations
-    const auto start = std::chrono::steady_clock::now();
+                    const fs::path& fieldsDir) {
+    using Clock = std::chrono::steady_clock;
+    auto seconds = [](Clock::time_point from, Clock::time_point to) { return std::chrono::duration<double>(to - from).count(); };
+    const auto start = Clock::now();
     Evaluation ev;
     ev.theta = theta;
     ev.resolution = resolution;
     const Scene scene = sceneWithParameters(job, theta, resolution);
-    const auto setupStart = std::chrono::steady_clock::now();
+    const auto setupStart = Clock::now();
     sim::Simulation simulation(scene);
-    ev.simulationSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - setupStart).count();
+    ev.simulationSeconds += seconds(setupStart, Clock::now());
+    std::optional<double> ground;
+    for (const Solid& solid : scene.solids)
+        if (const auto* g = std::get_if<GroundSolid>(&solid)) ground = g->height;
+    const bool writeFields = !fieldsDir.empty();
+    if (writeFields) {
+        fs::create_directories(fieldsDir);
+        ev.fields = FieldsSummary{};
+    }
+    double groundSpeedSum = 0;
     const int lastFrame = lastSimFrame(obs);
     const size_t count = obs.simFrames.size();
     ev.frameE.assign(count, 0.0);
     std::vector<double> areas(count, 0.0);
     for (int frame = 0; frame <= lastFrame; ++frame) {
-        const auto simStart = std::chrono::steady_clock::now();
+        const auto simStart = Clock::now();
         if (frame > 0) simulation.advanceFrame();
-        const auto simEnd = std::chrono::steady_clock::now();
-        ev.simulationSeconds += std::chrono::duration<double>(simEnd - simStart).count();
-        for (size_t i = 0; i < count; ++i) {
-            if (obs.simFrames[i] != frame) continue;
-            const auto levelSet = surface::liquidLevelSet(simulation.particles().position, scene.cellSize());
+        auto lap = Clock::now();
+        ev.simulationSeconds += seconds(simStart, lap);
+        const bool compared = std::find(obs.simFrames.begin(), obs.simFrames.end(), frame) != obs.simFrames.end();
+        if (!compared && !writeFields) {
+            ev.frameSeconds.push_back(seconds(simStart, lap));
+            continue;
+        }
+        const auto levelSet = surface::liquidLevelSet(simulation.particles().position, scene.cellSize());
+        if (writeFields) {
+            // Written before the clip below: Blender shows the container itself.
+            char name[32];
+            std::snprintf(name, sizeof name, "frame_%05d.vdb", frame);
+            surface::writeFrameVdb(fieldsDir / name, simulation, levelSet);
+            ++ev.fields->frames;
+            if (ground && frame > 0) {
+                double sum = 0;
+                int onGround = 0;
+                const sim::Particles& p = simulation.particles();
+                for (size_t i = 0; i < p.position.size(); ++i)
+                    if (p.position[i].z() < *ground + 2 * scene.cellSize()) {
+                        sum += p.velocity[i].norm();
+                        ++onGround;
+                    }
+                if (onGround > 0) {
+                    groundSpeedSum += sum / onGround;
+                    ++ev.fields->groundFrames;
+                }
+            }
+            const auto written = Clock::now();
+            ev.fieldsSeconds += seconds(lap, written);
+            lap = written;
+        }
+        if (compared) {
             surface::clipToSolidExterior(*levelSet, simulation);
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
-            ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared, job.silhouetteComparison);
-            areas[i] = comparedArea(silhouette, obs.compared);
-            ev.simulatedPixels += areas[i];
-            ev.E += obs.reference.weights[i] * ev.frameE[i];
+            for (size_t i = 0; i < count; ++i) {
+                if (obs.simFrames[i] != frame) continue;
+                ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared, job.silhouetteComparison);
+                areas[i] = comparedArea(silhouette, obs.compared);
+                ev.simulatedPixels += areas[i];
+                ev.E += obs.reference.weights[i] * ev.frameE[i];
+            }
         }
-        const auto frameEnd = std::chrono::steady_clock::now();
-        ev.silhouetteSeconds += std::chrono::duration<double>(frameEnd - simEnd).count();
-        ev.frameSeconds.push_back(std::chrono::duration<double>(frameEnd - simStart).count());
+        const auto frameEnd = Clock::now();
+        ev.silhouetteSeconds += seconds(lap, frameEnd);
+        ev.frameSeconds.push_back(seconds(simStart, frameEnd));
     }
+    if (ev.fields && ev.fields->groundFrames > 0) ev.fields->meanGroundSpeed = groundSpeedSum / ev.fields->groundFrames;
     if (obs.track) {
         std::vector<double> simulated;
         for (size_t i = 0; i < count; ++i)
             if (obs.simFrames[i] >= 0) simulated.push_back(areas[i]);
         ev.E += obs.trackWeight * normalizedSquaredError(simulated, referenceTrack(obs));
     }
-    ev.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ev.seconds = seconds(start, Clock::now());
     return ev;
 }
 

@@ -219,49 +219,40 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     return fit;
 }
 
-struct FieldsSummary {
-    int frames = 0;
-    double meanGroundSpeed = 0;  // m/s, particles within 2 Δx above the ground plane, mean over frames
-    int groundFrames = 0;
-};
+// The best full-fidelity evaluation's fields live in OUT/fields, with OUT/fields/evaluation.json
+// saying whose they are; full-fidelity evaluations write theirs into OUT/fields.partial/<k> and the
+// generation's winner replaces them. A re-simulation of θ* (35–100 s on the sample scene at 48³)
+// is then needed only when they are missing: a run killed between the two renames, or one whose
+// best evaluation ran without writing them.
+const char* const kFieldsFolder = "fields";
+const char* const kFieldsStaging = "fields.partial";
+const char* const kFieldsOwner = "evaluation.json";
 
-// Re-simulates θ* at full resolution and writes OUT/fields/frame_%05d.vdb (surface, velocity,
-// pressure) for Blender, plus the mean flow speed of the liquid on the ground.
-FieldsSummary writeBestFields(const Job& job, const Observation& obs, const std::vector<double>& theta,
-                              const fs::path& dir) {
-    fs::create_directories(dir);
-    const Scene scene = sceneWithParameters(job, theta, job.resolution);
-    sim::Simulation simulation(scene);
-    const int lastFrame = lastSimFrame(obs);
-    std::optional<double> ground;
-    for (const Solid& solid : scene.solids)
-        if (const auto* g = std::get_if<GroundSolid>(&solid)) ground = g->height;
-    FieldsSummary summary;
-    double speedSum = 0;
-    for (int frame = 0; frame <= lastFrame; ++frame) {
-        if (frame > 0) simulation.advanceFrame();
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%05d.vdb", frame);
-        surface::writeFrameVdb(dir / name, simulation,
-                               surface::liquidLevelSet(simulation.particles().position, scene.cellSize()));
-        ++summary.frames;
-        if (ground && frame > 0) {
-            double sum = 0;
-            int count = 0;
-            const auto& p = simulation.particles();
-            for (size_t i = 0; i < p.position.size(); ++i)
-                if (p.position[i].z() < *ground + 2 * scene.cellSize()) {
-                    sum += p.velocity[i].norm();
-                    ++count;
-                }
-            if (count > 0) {
-                speedSum += sum / count;
-                ++summary.groundFrames;
-            }
-        }
-    }
-    if (summary.groundFrames > 0) summary.meanGroundSpeed = speedSum / summary.groundFrames;
-    return summary;
+json fieldsOwner(const std::string& fingerprint, const Evaluation& ev, int frames) {
+    return {{"fingerprint", fingerprint},
+            {"theta", ev.theta},
+            {"resolution", ev.resolution},
+            {"frames", frames},
+            {"mean_ground_speed_m_s", ev.fields->groundFrames ? json(ev.fields->meanGroundSpeed) : json()}};
+}
+
+// Makes `staged` (an evaluation's fields folder) OUT/fields.
+void promoteFields(const fs::path& staged, const json& owner, const fs::path& outDir) {
+    std::ofstream(staged / kFieldsOwner) << owner.dump(1) << "\n";
+    fs::remove_all(outDir / kFieldsFolder);
+    fs::rename(staged, outDir / kFieldsFolder);
+}
+
+// OUT/fields' owner when it holds θ at this job, resolution and frame count; null otherwise.
+json fieldsOf(const fs::path& outDir, const std::string& fingerprint, const std::vector<double>& theta,
+              int resolution, int frames) {
+    std::ifstream stream(outDir / kFieldsFolder / kFieldsOwner);
+    if (!stream) return nullptr;
+    const json owner = json::parse(stream, nullptr, false);
+    if (owner.is_discarded() || owner.value("fingerprint", "") != fingerprint || owner.value("resolution", 0) != resolution ||
+        owner.value("frames", 0) != frames || !owner.contains("theta") || owner.at("theta") != json(theta))
+        return nullptr;
+    return owner;
 }
 
 // The first coarse generation's points in one dimension: `count` evenly over ±2σ₀ around the start,
@@ -467,10 +458,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         if (g == coarseEnd && coarseEnd > 0) xs.back() = es.mean();
         std::vector<Evaluation> evals(xs.size());
         std::vector<std::string> errors(xs.size());
+        const bool stageFields = options.writeFields && !coarse;
+        const fs::path staging = outDir / kFieldsStaging;
+        fs::remove_all(staging);  // what a killed generation left
+        auto stagedFields = [&](size_t k) { return stageFields ? staging / std::to_string(k) : fs::path(); };
         arena.execute([&] {
             tbb::parallel_for(0, static_cast<int>(xs.size()), 1, [&](int k) {
                 try {
-                    evals[k] = evaluate(job, coarse ? coarseObs : obs, thetaOf(xs[k], bounds), resolution);
+                    evals[k] = evaluate(job, coarse ? coarseObs : obs, thetaOf(xs[k], bounds), resolution, stagedFields(k));
                 } catch (const InputError&) {
                     throw;
                 } catch (const std::exception& e) {  // an unstable simulation ranks last, never aborts the run
@@ -504,9 +499,19 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                    {"frame_s", vec(evals[k].frameSeconds)},
                    {"seconds", evals[k].seconds},
                    {"simulation_s", evals[k].simulationSeconds},
-                   {"silhouette_s", evals[k].silhouetteSeconds}};
+                   {"silhouette_s", evals[k].silhouetteSeconds},
+                   {"fields_s", evals[k].fieldsSeconds}};
             if (!errors[k].empty()) e["error"] = errors[k];
             evaluated.push_back(e);
+        }
+        if (stageFields) {
+            // The new best full-fidelity evaluation, if this generation made it, keeps its fields.
+            const json* best = bestAt(kFull);
+            const size_t first = evaluated.size() - xs.size();
+            for (size_t k = 0; k < xs.size(); ++k)
+                if (best == &evaluated[first + k] && evals[k].fields)
+                    promoteFields(stagedFields(k), fieldsOwner(print, evals[k], fineFrames + 1), outDir);
+            fs::remove_all(staging);
         }
         es.tell(xs, fitness);
         if (scan) es.restart(xs[bestK], Eigen::VectorXd::Constant(1, std::max(0.5 * (xs[1][0] - xs[0][0]), 1e-6)));
@@ -669,10 +674,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         json& r = perFidelity[e.at("fidelity").get<std::string>()];
         if (r.is_null())
             r = {{"resolution", e.at("resolution")}, {"frames", e.at("frames")}, {"evaluations", 0}, {"seconds", 0.0},
-                 {"simulation_s", 0.0}, {"silhouette_s", 0.0}};
+                 {"simulation_s", 0.0}, {"silhouette_s", 0.0}, {"fields_s", 0.0}};
         r["evaluations"] = r.value("evaluations", 0) + 1;
         r["simulation_s"] = r["simulation_s"].get<double>() + e.value("simulation_s", 0.0);
         r["silhouette_s"] = r["silhouette_s"].get<double>() + e.value("silhouette_s", 0.0);
+        r["fields_s"] = r["fields_s"].get<double>() + e.value("fields_s", 0.0);
         r["seconds"] = r.value("seconds", 0.0) + e.at("seconds").get<double>();
     }
     for (auto& [key, r] : perFidelity.items()) r["mean_seconds"] = r["seconds"].get<double>() / r["evaluations"].get<int>();
@@ -707,10 +713,19 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
     if (options.writeFields) {
         const auto fieldsStart = Clock::now();
-        const FieldsSummary fields = writeBestFields(job, obs, result.theta, outDir / "fields");
-        doc["fields"] = {{"folder", "fields"},
-                         {"frames", fields.frames},
-                         {"mean_ground_speed_m_s", fields.groundFrames ? json(fields.meanGroundSpeed) : json()},
+        json owner = fieldsOf(outDir, print, result.theta, fineRes, fineFrames + 1);
+        const bool kept = !owner.is_null();
+        if (!kept) {
+            const fs::path staged = outDir / kFieldsStaging / "best";
+            const Evaluation ev = evaluate(job, obs, result.theta, fineRes, staged);
+            owner = fieldsOwner(print, ev, fineFrames + 1);
+            promoteFields(staged, owner, outDir);
+            fs::remove_all(outDir / kFieldsStaging);
+        }
+        doc["fields"] = {{"folder", kFieldsFolder},
+                         {"frames", owner.at("frames")},
+                         {"mean_ground_speed_m_s", owner.at("mean_ground_speed_m_s")},
+                         {"source", kept ? "the best evaluation's run" : "θ* simulated again"},
                          {"seconds", std::chrono::duration<double>(Clock::now() - fieldsStart).count()}};
     }
     // Every evaluation as CSV for plotting.

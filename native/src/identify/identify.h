@@ -197,6 +197,13 @@ Observation firstPartOf(const Observation& observation, double share);
 // The last simulation frame any reference frame is compared with.
 int lastSimFrame(const Observation& observation);
 
+// What an evaluation wrote of its simulation's hidden fields (see evaluate).
+struct FieldsSummary {
+    int frames = 0;
+    double meanGroundSpeed = 0;  // m/s, particles within 2 Δx above the ground plane, mean over frames
+    int groundFrames = 0;        // frames with liquid on the ground (0: no ground, or none reached it)
+};
+
 struct Evaluation {
     std::vector<double> theta;
     int resolution = 0;
@@ -204,13 +211,17 @@ struct Evaluation {
     std::vector<double> frameE;
     double simulatedPixels = 0;  // total silhouette area over frames (0 = the camera saw nothing)
     double seconds = 0;
-    double simulationSeconds = 0, silhouetteSeconds = 0;  // where the time went
-    std::vector<double> frameSeconds;  // per simulated frame 0..lastSimFrame (simulation + silhouettes)
+    double simulationSeconds = 0, silhouetteSeconds = 0, fieldsSeconds = 0;  // where the time went
+    std::vector<double> frameSeconds;  // per simulated frame 0..lastSimFrame (all of the above)
+    std::optional<FieldsSummary> fields;  // when asked to write them
 };
 
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution);
+// Simulates θ at `resolution` and scores it. With a `fieldsDir`, it also writes every frame
+// 0..lastSimFrame there as frame_%05d.vdb (surface, velocity, pressure) for Blender, so that the
+// best evaluation's own run can be kept instead of simulated again.
 Evaluation evaluate(const Job& job, const Observation& observation, const std::vector<double>& theta,
-                    int resolution, const std::atomic<bool>* cancel = nullptr);
+                    int resolution, const std::filesystem::path& fieldsDir = {});
 
 // ---------------------------------------------------------------------------------------------
 // The search space the optimizer sees (see the top of this file), shared with benchmarks that run
@@ -263,7 +274,7 @@ struct IdentifyOptions {
     std::function<void(const GenerationReport&)> onGeneration;
     std::function<void(const std::string&)> onWarning;  // a result the user should doubt, and why
     const std::atomic<bool>* cancel = nullptr;
-    bool writeFields = true;  // the best simulation's last frame .vdb into OUT/fields
+    bool writeFields = true;  // θ*'s simulation, every frame as .vdb, into OUT/fields
 };
 
 // Runs (or resumes from OUT/checkpoint.json) the identification and writes OUT/result.json,
