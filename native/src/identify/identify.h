@@ -211,7 +211,8 @@ struct Evaluation {
     std::vector<double> frameE;
     double simulatedPixels = 0;  // total silhouette area over frames (0 = the camera saw nothing)
     double seconds = 0;
-    double simulationSeconds = 0, silhouetteSeconds = 0, fieldsSeconds = 0;  // where the time went
+    // Where the time went; fieldsSeconds is the .vdb writes and the level sets only they need.
+    double simulationSeconds = 0, silhouetteSeconds = 0, fieldsSeconds = 0;
     std::vector<double> frameSeconds;  // per simulated frame 0..lastSimFrame (all of the above)
     std::optional<FieldsSummary> fields;  // when asked to write them
 };
