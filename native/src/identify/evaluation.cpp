@@ -224,11 +224,9 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             continue;
         }
         const auto levelSet = surface::liquidLevelSet(simulation.particles().position, scene.cellSize());
-        if (!compared) {  // built for the fields alone
-            const auto built = Clock::now();
-            ev.fieldsSeconds += seconds(lap, built);
-            lap = built;
-        }
+        const auto built = Clock::now();
+        (compared ? ev.silhouetteSeconds : ev.fieldsSeconds) += seconds(lap, built);
+        lap = built;
         if (writeFields) {
             // Written before the clip below: Blender shows the container itself.
             char name[32];
