@@ -221,9 +221,13 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
 
 // The best full-fidelity evaluation's fields live in OUT/fields, with OUT/fields/evaluation.json
 // saying whose they are; full-fidelity evaluations write theirs into OUT/fields.partial/<k> and the
-// generation's winner replaces them. A re-simulation of θ* (35–100 s on the sample scene at 48³)
-// is then needed only when they are missing: a run killed between the two renames, or one whose
-// best evaluation ran without writing them.
+// generation's winner replaces them. Simulating θ* again for them took 26–97 s of a 10-minute
+// identification on the sample scene at 48³ (η = 10…300); writing them costs each full-fidelity
+// evaluation its .vdb writes (0.6 s of a 65 s evaluation at η = 3, 61 frames), and the level sets
+// of frames it does not compare (longer clips, compared every few frames). θ* is simulated
+// (and scored) again only when they are missing: a run killed while promoteFields swaps them, or
+// one whose best evaluation ran without writing them. A kill -9 mid-generation leaves
+// OUT/fields.partial until the next generation of the run.
 const char* const kFieldsFolder = "fields";
 const char* const kFieldsStaging = "fields.partial";
 const char* const kFieldsOwner = "evaluation.json";
