@@ -18,11 +18,13 @@ double boxDistance(const Vec3& x, const Vec3& lo, const Vec3& hi) {
 }
 
 // Distance to a z-aligned solid cylinder r <= radius, z in [z0, z1], centred at (cx, cy).
+// √(a² + b²) rather than std::hypot, whose care for overflow no scene length needs: the cup's
+// three cylinders made hypot 4.7 % of a 48³ simulation's time at η = 300.
 double cylinderDistance(const Vec3& x, const Vec3& base, double radius, double z0, double z1) {
-    const double r = std::hypot(x.x() - base.x(), x.y() - base.y());
+    const double r = Eigen::Vector2d(x.x() - base.x(), x.y() - base.y()).norm();
     const double dr = r - radius;
     const double dz = std::max(z0 - x.z(), x.z() - z1);
-    return std::hypot(std::max(dr, 0.0), std::max(dz, 0.0)) + std::min(std::max(dr, dz), 0.0);
+    return Eigen::Vector2d(std::max(dr, 0.0), std::max(dz, 0.0)).norm() + std::min(std::max(dr, dz), 0.0);
 }
 
 // The cup: an outer cylinder minus the inner cavity minus the hole through the bottom.
