@@ -56,10 +56,11 @@ struct FrameStats {
     bool converged = true;
 };
 
-// A narrow-band level set (negative inside) of spheres of `radius` around the particles, built with
-// openvdb::tools::ParticlesToLevelSet, renormalized by tools::LevelSetTracker and smoothed by
-// `smoothingPasses` Gaussian passes (tools::Filter). Voxel centres sit at `origin` + (i + ½)
-// voxelSize, so with voxelSize = Δx they coincide with the cell centres.
+// A narrow-band level set (negative inside) of spheres of `radius` around the particles, rasterized
+// as openvdb::tools::ParticlesToLevelSet would (through a dense box; see the .cpp), renormalized by
+// tools::LevelSetTracker and smoothed by `smoothingPasses` Gaussian passes (tools::Filter). Voxel
+// centres sit at `origin` + (i + ½) voxelSize, so with voxelSize = Δx they coincide with the cell
+// centres.
 // `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
 // units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.
 inline constexpr double kDefaultBandHalfWidth = 3.0;

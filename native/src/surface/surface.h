@@ -1,5 +1,5 @@
-// Particles → liquid surface → files. The surface is an OpenVDB narrow-band level set built with
-// tools::ParticlesToLevelSet and closed by an inset (sim::particleLevelSet); it can be meshed with
+// Particles → liquid surface → files. The surface is an OpenVDB narrow-band level set of spheres
+// around the particles, closed by an inset (sim::particleLevelSet); it can be meshed with
 // tools::volumeToMesh. Per-frame files:
 //   frame_NNNNN.vdb   grids "surface" (level set, m), "velocity" (Vec3f, m/s), "pressure" (Pa),
 //                     in world space (Blender's, Z-up, metres), cell-centred at the sim's Δx.
