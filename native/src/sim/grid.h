@@ -89,36 +89,44 @@ inline void interpolationStencil(const Grid& g, const Stagger& s, const Vec3& x,
     }
 }
 
-// Calls visit(index, weight, weightGradient, unclamped) for the 8 lattice samples around x, where
-// `unclamped` is the sample's lattice position before clamping. Samples beyond a non-periodic
-// boundary are clamped onto it (constant extension): skipping them instead would leave weight
-// gradients that do not sum to zero, and APIC would read that as a spurious affine velocity.
-// Callers that need another value beyond the boundary (a wall's ghost) read it from `unclamped`.
+// Calls visit(index, weight, weightGradient, beyond) for the 8 lattice samples around x, where
+// `beyond` is null for a sample in the lattice and, for one beyond a non-periodic boundary, points
+// to its lattice position (periodic axes wrapped). Such samples are clamped onto the boundary
+// (constant extension): skipping them instead would leave weight gradients that do not sum to
+// zero, and APIC would read that as a spurious affine velocity. Callers that need another value
+// there (a wall's ghost) read it from `beyond`. Stencils wholly inside the lattice, nearly all of
+// them, skip the clamping and wrapping.
 template <class Visit>
 void forEachStencilSampleBeyond(const Grid& g, const Lattice& l, const Vec3& x, Visit&& visit) {
     Vec3i base;
     Vec3 f;
     interpolationStencil(g, l.stagger, x, base, f);
+    const bool inside = (base.array() >= 0).all() && (base.array() + 1 < l.size.array()).all();
     for (int dk = 0; dk < 2; ++dk)
         for (int dj = 0; dj < 2; ++dj)
             for (int di = 0; di < 2; ++di) {
-                const Vec3i unclamped = base + Vec3i(di, dj, dk);
-                Vec3i c = unclamped;
-                for (int a = 0; a < 3; ++a)
-                    if (!l.periodic[a]) c[a] = std::clamp(c[a], 0, l.size[a] - 1);
-                l.resolve(c);
+                Vec3i position = base + Vec3i(di, dj, dk);
+                Vec3i c = position;
+                bool beyond = false;
+                if (!inside) {
+                    for (int a = 0; a < 3; ++a) {
+                        if (l.periodic[a]) c[a] = position[a] = ((c[a] % l.size[a]) + l.size[a]) % l.size[a];
+                        else c[a] = std::clamp(c[a], 0, l.size[a] - 1);
+                    }
+                    beyond = c != position;
+                }
                 const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1],
                              wz = dk ? f[2] : 1 - f[2];
                 const Vec3 grad = Vec3((di ? 1 : -1) * wy * wz, (dj ? 1 : -1) * wx * wz,
                                        (dk ? 1 : -1) * wx * wy) / g.dx;
-                visit(l.index(c[0], c[1], c[2]), wx * wy * wz, grad, unclamped);
+                visit(l.index(c[0], c[1], c[2]), wx * wy * wz, grad, beyond ? &position : nullptr);
             }
 }
 
 // As above, for callers to whom a clamped sample is the boundary's own value.
 template <class Visit>
 void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&& visit) {
-    forEachStencilSampleBeyond(g, l, x, [&](int i, double w, const Vec3& dw, const Vec3i&) { visit(i, w, dw); });
+    forEachStencilSampleBeyond(g, l, x, [&](int i, double w, const Vec3& dw, const Vec3i*) { visit(i, w, dw); });
 }
 
 inline double interpolate(const Grid& g, const Field& field, const Vec3& x) {

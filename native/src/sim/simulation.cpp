@@ -655,11 +655,11 @@ double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) con
     const Field& u = state_.velocity[a];
     double value = 0;
     if (gradient) gradient->setZero();
-    forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, Vec3i unclamped) {
+    forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, const Vec3i* beyond) {
         double sample = u[f];
-        if (!u.lattice.resolve(unclamped) && !fractions_.solidFace[a][f])  // beyond a non-periodic boundary
+        if (beyond && !fractions_.solidFace[a][f])
             sample *= wallGhostRatio(solids_->distance(grid_.position(kFace[a], u.lattice.coords(f))),
-                                     solids_->distance(grid_.position(kFace[a], unclamped)),
+                                     solids_->distance(grid_.position(kFace[a], *beyond)),
                                      scene_.material.slipLength, grid_.dx);
         value += w * sample;
         if (gradient) *gradient += dw * sample;
