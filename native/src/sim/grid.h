@@ -36,16 +36,14 @@ struct Lattice {
     Vec3i coords(int idx) const {
         return {idx % size[0], (idx / size[0]) % size[1], idx / (size[0] * size[1])};
     }
-    // Wraps the periodic axes of (i,j,k) into the lattice.
-    void wrapPeriodic(Vec3i& c) const {
-        for (int a = 0; a < 3; ++a)
-            if (periodic[a]) c[a] = ((c[a] % size[a]) + size[a]) % size[a];
-    }
+    // Index i along periodic axis a, wrapped into [0, size[a]).
+    int wrapped(int i, int a) const { return ((i % size[a]) + size[a]) % size[a]; }
     // Wraps periodic axes; returns false when (i,j,k) lies outside a non-periodic axis.
     bool resolve(Vec3i& c) const {
-        wrapPeriodic(c);
-        for (int a = 0; a < 3; ++a)
-            if (!periodic[a] && (c[a] < 0 || c[a] >= size[a])) return false;
+        for (int a = 0; a < 3; ++a) {
+            if (periodic[a]) c[a] = wrapped(c[a], a);
+            else if (c[a] < 0 || c[a] >= size[a]) return false;
+        }
         return true;
     }
     // Index of a neighbour, or -1 outside the domain.
@@ -113,8 +111,10 @@ void forEachStencilSampleBeyond(const Grid& g, const Lattice& l, const Vec3& x, 
                 Vec3i c = position;
                 bool beyond = false;
                 if (!inside) {
-                    l.wrapPeriodic(position);
-                    for (int a = 0; a < 3; ++a) c[a] = l.periodic[a] ? position[a] : std::clamp(position[a], 0, l.size[a] - 1);
+                    for (int a = 0; a < 3; ++a) {
+                        if (l.periodic[a]) c[a] = position[a] = l.wrapped(c[a], a);
+                        else c[a] = std::clamp(c[a], 0, l.size[a] - 1);
+                    }
                     beyond = c != position;
                 }
                 const double wx = di ? f[0] : 1 - f[0], wy = dj ? f[1] : 1 - f[1],
