@@ -110,6 +110,51 @@ TEST_F(CliObserve, ExtractThenScoreWithJsonProgress) {
     EXPECT_TRUE(fs::exists(dir_ / "score" / "diff_00005.png"));
 }
 
+// score draws a simulated surface as identify does: the particle spheres' reach below the ground is
+// cut off, with the solids of the scene `simulate` recorded beside the frames (or of --scene).
+// Against an empty reference, E by pixels is the silhouette's area, so the cut must lower it.
+TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {
+    const fs::path black = dir_ / "black.mp4";
+    ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i color=c=black:size=96x72:rate=10 -frames:v 3 -c:v mpeg4 " +
+                           black.string()).c_str()),
+              0);
+    ASSERT_EQ(run("extract " + black.string() + " --out " + (dir_ / "ref").string() + " --background-frames 1").exitCode, 0);
+    // A slab of liquid resting on the ground, seen level from 30 cm at 2 cm above the ground.
+    const nlohmann::json scene{
+        {"format", "viscoscope.scene"}, {"version", 1},
+        {"domain", {{"min", {-0.05, -0.05, 0}}, {"max", {0.05, 0.05, 0.05}}, {"resolution", 16}}},
+        {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
+        {"liquids", {{{"type", "box"}, {"min", {-0.02, -0.02, 0}}, {"max", {0.02, 0.02, 0.01}}}}},
+        {"material", {{"density", 1000}, {"viscosity", 10.0}}}, {"fps", 30}, {"frames", 2},
+        {"output", {{"particles", false}, {"vdb", true}, {"mesh", false}}}};
+    std::ofstream(dir_ / "scene.json") << scene.dump();
+    ASSERT_EQ(run("simulate " + (dir_ / "scene.json").string() + " --out " + (dir_ / "sim").string() +
+                  " --progress none").exitCode, 0);
+    const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
+                                {"K", {{400, 0, 47.5}, {0, 400, 35.5}, {0, 0, 1}}},
+                                {"distortion", {0, 0, 0, 0, 0}},
+                                {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
+                                {"t", {0, 0.02, 0.3}}};
+    std::ofstream(dir_ / "camera.json") << camera.dump();
+    auto score = [&](const std::string& name) {
+        const CommandResult scored =
+            run("score --comparison pixels --progress none --camera " + (dir_ / "camera.json").string() +
+                " --reference " + (dir_ / "ref").string() + " --sim " + (dir_ / "sim").string() + " --out " +
+                (dir_ / name).string());
+        EXPECT_EQ(scored.exitCode, 0) << scored.err;
+        return nlohmann::json::parse(slurp(dir_ / name / "score.json"));
+    };
+    const nlohmann::json clipped = score("clipped");
+    fs::remove(dir_ / "sim" / "simulation.json");  // another program's surfaces: nothing to clip with
+    const nlohmann::json unclipped = score("unclipped");
+    EXPECT_TRUE(clipped.at("clipped_to_solids").get<bool>());
+    EXPECT_FALSE(unclipped.at("clipped_to_solids").get<bool>());
+    const double clippedE = clipped.at("E").get<double>(), unclippedE = unclipped.at("E").get<double>();
+    std::printf("E against an empty reference: %.5f clipped, %.5f not\n", clippedE, unclippedE);
+    EXPECT_GT(clippedE, 0);
+    EXPECT_LT(clippedE, 0.99 * unclippedE);  // the same surfaces: without the cut the two are equal
+}
+
 // Phones store portrait clips as landscape frames plus a rotation tag; masks must come out upright.
 TEST_F(CliObserve, HonoursRotationMetadata) {
     const fs::path landscape = makeVideo("landscape.mp4", 4);

@@ -102,7 +102,7 @@ TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
     };
     const int belowBefore = insideVoxels(true), aboveBefore = insideVoxels(false);
     ASSERT_GT(belowBefore, 0);  // otherwise there is nothing to clip and the test proves nothing
-    surface::clipToSolidExterior(*levelSet, simulation);
+    surface::clipToSolidExterior(*levelSet, simulation.solids());
     EXPECT_EQ(insideVoxels(true), 0);
     EXPECT_EQ(insideVoxels(false), aboveBefore);
 }

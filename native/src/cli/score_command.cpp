@@ -3,6 +3,8 @@
 #include "cli/progress.h"
 #include "observe/observe.h"
 #include "scene/scene.h"
+#include "sim/sim.h"
+#include "surface/surface.h"
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -11,6 +13,7 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
+#include <optional>
 
 namespace viscoscope::cli {
 
@@ -19,7 +22,7 @@ namespace {
 namespace fs = std::filesystem;
 
 struct ScoreArguments {
-    std::string camera, reference, sim, outDir, progress = "text",
+    std::string camera, reference, sim, scene, outDir, progress = "text",
                 comparison = silhouetteComparisonName(kDefaultSilhouetteComparison);
     int simFirst = 0;
     bool fast = false;
@@ -75,11 +78,31 @@ std::vector<Eigen::Vector3d> boundingBoxCorners(const openvdb::FloatGrid& grid) 
     return corners;
 }
 
+// The scene's solids, from --scene or else the scene `simulate` recorded in SIM/simulation.json;
+// none when neither is there (a folder of another program's surfaces).
+std::unique_ptr<sim::SolidField> sceneSolids(const ScoreArguments& args) {
+    std::optional<Scene> scene;
+    if (!args.scene.empty()) {
+        scene = loadScene(args.scene);
+    } else if (const fs::path record = fs::path(args.sim) / "simulation.json"; fs::exists(record)) {
+        std::ifstream stream(record);
+        const nlohmann::json doc = nlohmann::json::parse(stream, nullptr, false);
+        if (doc.is_discarded() || !doc.contains("scene"))
+            throw InputError(record.string() + ": not a simulation record with a \"scene\"");
+        scene = parseScene(doc["scene"], record.string() + ": scene");
+    }
+    if (!scene) return nullptr;
+    return std::make_unique<sim::SolidField>(scene->solids, sim::sceneGrid(*scene));
+}
+
+// A surface's silhouette; with `solids`, as identify draws it: the parts of the particle spheres
+// inside solids (below the ground, in walls) removed, since no camera sees liquid there.
 cv::Mat1b simulatedSilhouette(const fs::path& file, const PinholeCamera& camera, bool fast,
-                              const std::string& cameraFile) {
+                              const std::string& cameraFile, const sim::SolidField* solids) {
     if (file.extension() == ".vdb") {
         const openvdb::FloatGrid::Ptr grid = readSurfaceGrid(file);
         requireInFront(camera, boundingBoxCorners(*grid), cameraFile, file);
+        if (solids) surface::clipToSolidExterior(*grid, *solids);
         return fast ? silhouetteFromLevelSetFast(*grid, camera) : silhouetteFromLevelSet(*grid, camera);
     }
     const TriangleMesh mesh = loadMesh(file);  // meshes are already cheap to fill: no fast path
@@ -108,6 +131,8 @@ int runScore(const ScoreArguments& args) {
     if (!fs::is_directory(args.sim)) throw InputError(args.sim + ": simulation folder not found");
     const cv::Mat1b compared = reference.comparedPixels();
     const SilhouetteComparison comparison = parseSilhouetteComparison(args.comparison, "--comparison");
+    const std::unique_ptr<sim::SolidField> solids = sceneSolids(args);
+    bool clipped = solids != nullptr;  // and every frame a level set (meshes are drawn as they are)
     fs::create_directories(args.outDir);
     fs::remove(fs::path(args.outDir) / "score.json");
 
@@ -123,10 +148,11 @@ int runScore(const ScoreArguments& args) {
         nlohmann::json entry{{"frame", reference.frames[j]}, {"time_s", reference.times[j]}, {"weight", reference.weights[j]}};
         if (reference.weights[j] != 0) {
             const fs::path simFile = simulationFrame(args.sim, args.simFirst + j);
-            const cv::Mat1b simulated = simulatedSilhouette(simFile, camera, args.fast, args.camera);
+            const cv::Mat1b simulated = simulatedSilhouette(simFile, camera, args.fast, args.camera, solids.get());
             const cv::Mat1b observed = reference.mask(j);
             const double frameE = frameObjective(simulated, observed, compared, comparison);
             objective += reference.weights[j] * frameE;
+            clipped &= simFile.extension() == ".vdb";
             entry["sim_file"] = simFile.string();
             entry["E_f"] = frameE;
             entry["iou"] = intersectionOverUnion(simulated, observed, compared);
@@ -138,6 +164,7 @@ int runScore(const ScoreArguments& args) {
     }
     const nlohmann::json score{{"format", "viscoscope.score"}, {"version", 1},
                                {"silhouette", args.fast ? "fast" : "exact"}, {"comparison", args.comparison},
+                               {"clipped_to_solids", clipped},
                                {"camera", args.camera},       {"reference", args.reference},
                                {"sim", args.sim},             {"pixels", reference.width * reference.height},
                                {"E", objective},              {"frames", frames}};
@@ -155,6 +182,8 @@ Command addScoreCommand(CLI::App& app) {
     sub->add_option("--reference", args->reference, "Folder written by `extract` (manifest.json, masks/)")->required();
     sub->add_option("--sim", args->sim, "Folder of frame_%05d.vdb (float grid \"surface\", metres) or .obj/.ply")
         ->required();
+    sub->add_option("--scene", args->scene,
+                    "Scene whose solids clip the surfaces, as identify does (default: SIM/simulation.json's)");
     sub->add_option("--sim-first", args->simFirst, "Number of the simulation frame matching the first reference frame")
         ->capture_default_str();
     sub->add_option("--out", args->outDir, "Output folder (score.json, diff_%05d.png)")->required();

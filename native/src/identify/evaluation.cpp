@@ -252,7 +252,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             lap = written;
         }
         if (compared) {
-            surface::clipToSolidExterior(*levelSet, simulation);
+            surface::clipToSolidExterior(*levelSet, simulation.solids());
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
             for (size_t i = 0; i < count; ++i) {

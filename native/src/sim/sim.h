@@ -68,6 +68,9 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
                                          const Vec3& origin, int smoothingPasses,
                                          double halfWidth = kDefaultBandHalfWidth, double inset = 0.0);
 
+// The MAC grid a simulation of `scene` runs on.
+Grid sceneGrid(const Scene& scene);
+
 class Simulation {
 public:
     explicit Simulation(const Scene& scene);
@@ -92,7 +95,7 @@ public:
     double liquidVolume() const;
     // Trilinear on the staggered grid; beyond the domain's walls, their ghosts (wallGhostRatio).
     Vec3 velocityAt(const Vec3& x) const;
-    double solidDistance(const Vec3& x) const;
+    const SolidField& solids() const { return *solids_; }
 
 private:
     void seedParticles();

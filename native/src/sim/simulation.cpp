@@ -120,12 +120,17 @@ bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, 
 
 }  // namespace
 
+Grid sceneGrid(const Scene& scene) {
+    Grid grid;
+    grid.origin = scene.domain.min;
+    grid.dx = scene.cellSize();
+    grid.cells = scene.cellCounts();
+    grid.periodic = scene.domain.periodic;
+    return grid;
+}
+
 Simulation::Simulation(const Scene& scene)
-    : scene_(scene), random_(scene.seed) {
-    grid_.origin = scene.domain.min;
-    grid_.dx = scene.cellSize();
-    grid_.cells = scene.cellCounts();
-    grid_.periodic = scene.domain.periodic;
+    : scene_(scene), grid_(sceneGrid(scene)), random_(scene.seed) {
     solids_ = std::make_unique<SolidField>(scene.solids, grid_);
     material_ = std::make_unique<MaterialLaw>(scene.material);
     solver_ = makeSolver(scene.solver.scheme == StokesScheme::Unified);
@@ -293,7 +298,6 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
     return grid;
 }
 
-double Simulation::solidDistance(const Vec3& x) const { return solids_->distance(x); }
 
 void Simulation::seedParticles() {
     const int perCell = scene_.solver.particlesPerCell;

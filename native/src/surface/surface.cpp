@@ -28,11 +28,11 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
                                  options.inset * cellSize);
 }
 
-void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::Simulation& simulation) {
+void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids) {
     const openvdb::math::Transform& transform = levelSet.transform();
     for (auto voxel = levelSet.tree().beginValueOn(); voxel; ++voxel) {
         const openvdb::Vec3d x = transform.indexToWorld(voxel.getCoord());
-        const double outside = -simulation.solidDistance(Eigen::Vector3d(x.x(), x.y(), x.z()));
+        const double outside = -solids.distance(Eigen::Vector3d(x.x(), x.y(), x.z()));
         if (outside > *voxel) voxel.setValue(static_cast<float>(outside));
     }
 }

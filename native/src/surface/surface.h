@@ -10,6 +10,7 @@
 #pragma once
 
 #include "sim/sim.h"
+#include "sim/solid_field.h"
 
 #include <openvdb/openvdb.h>
 
@@ -40,7 +41,7 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
 // Removes what lies inside the simulation's solids from a liquid level set, φ ← max(φ, −d_solid):
 // the particle spheres reach a fraction of a cell below the ground and into walls, where no
 // camera can see liquid, and a silhouette compared with footage must not include it.
-void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::Simulation& simulation);
+void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids);
 
 // Triangles of the zero iso-surface (quads split in two).
 void meshLevelSet(const openvdb::FloatGrid& levelSet, std::vector<openvdb::Vec3s>& points,
