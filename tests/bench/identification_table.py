@@ -23,6 +23,7 @@ try it small first:
 import argparse
 import json
 import math
+import os
 import pathlib
 import shutil
 import subprocess
@@ -60,8 +61,11 @@ def normalized(v):
 def run(command, log):
     """Runs an engine command; on failure prints its stderr and stops."""
     started = time.monotonic()
+    # An --engine built or copied outside this checkout finds render_reference.py here.
+    env = dict(os.environ)
+    env.setdefault("VISCOSCOPE_SCRIPTS", str(ROOT / "scripts"))
     with open(log, "w", encoding="utf-8") as out:
-        result = subprocess.run([str(c) for c in command], stdout=subprocess.PIPE, stderr=out, text=True)
+        result = subprocess.run([str(c) for c in command], stdout=subprocess.PIPE, stderr=out, text=True, env=env)
     if result.returncode != 0:
         sys.exit(f"{' '.join(str(c) for c in command)} failed (exit {result.returncode}):\n"
                  + pathlib.Path(log).read_text(encoding="utf-8"))

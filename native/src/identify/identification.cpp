@@ -98,7 +98,9 @@ std::string fingerprint(const Job& job) {
     doc["_camera"] = cameraToJson(job.camera);
     doc["_reference"] = job.referenceDir.string();
     doc["_reference_source"] = referenceSource(job);
-    doc["_silhouette_comparison"] = silhouetteComparisonName(job.silhouetteComparison);  // its default may change
+    // Their defaults may change between engine versions:
+    doc["_silhouette_comparison"] = silhouetteComparisonName(job.silhouetteComparison);
+    doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
     const std::string text = doc.dump();
     std::uint64_t hash = 1469598103934665603ull;
     for (unsigned char c : text) hash = (hash ^ c) * 1099511628211ull;

@@ -203,7 +203,9 @@ cv::Mat1b silhouetteFromParticles(const std::vector<Eigen::Vector3d>& points, do
 // The fast path for a level set: splats the inner band voxels (−h ≤ φ ≤ 0) as discs of radius h/2
 // and closes the gaps. Any ray through a closed surface crosses that band, so it covers the
 // silhouette without meshing. (h/2 rather than the half diagonal: that bloats the outline by about
-// a third of a voxel and lowers the IoU against the exact path from 0.99 to 0.97.)
+// a third of a voxel and lowers the IoU against the exact path from 0.99 to 0.97.) A disc smaller
+// than a pixel still fills the pixel it falls in, so outlines come out up to about a pixel wider
+// than the exact path's: a preview, not what identify compares.
 cv::Mat1b silhouetteFromLevelSetFast(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
 // World positions of the level set's inner band voxels (what the fast path splats).
 std::vector<Eigen::Vector3d> innerBandPoints(const openvdb::FloatGrid& levelSet);
