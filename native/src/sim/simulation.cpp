@@ -298,7 +298,6 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
     return grid;
 }
 
-
 void Simulation::seedParticles() {
     const int perCell = scene_.solver.particlesPerCell;
     const int perAxis = static_cast<int>(std::round(std::cbrt(perCell)));
