@@ -130,7 +130,9 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
     }
     if (type == "mesh") {
         std::filesystem::path path = r.string("path");
-        if (path.is_relative()) path = baseDir / path;
+        // Absolute, so that the scene a run records (simulation.json, a job's checkpoint) still
+        // names the file when read from another working directory, as `score` reads it.
+        path = std::filesystem::absolute(baseDir / path);
         std::ifstream probe(path);
         if (!probe) r.fail("path", "cannot read mesh file '" + path.string() + "'");
         const std::string ext = path.extension().string();
