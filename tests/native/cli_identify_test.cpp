@@ -207,6 +207,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["silhouette_comparison"] = "columns";
         expectBadInput(writeJob(doc, "comparison.json"), "silhouette_comparison: \"columns\" is not");
     }
+    {  // a switch that is not true or false
+        json doc = job();
+        doc["alignment_check"] = "yes";
+        expectBadInput(writeJob(doc, "alignment.json"), "alignment_check: must be true or false");
+    }
     {  // a measured area track that never leaves 0
         std::ofstream(dir_ / "flat_track.csv") << "time_s,area_px\n0,0\n10,0\n";
         json doc = job();

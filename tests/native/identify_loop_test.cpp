@@ -222,12 +222,26 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     EXPECT_TRUE(scored) << "coarse best " << coarseBestEta;
     EXPECT_LE(result.interval[0][0], result.theta[0]);
     EXPECT_GE(result.interval[0][1], result.theta[0]);
+    // The alignment check scores θ* and 1.15 θ* on the grid moved by half a cell, and the interval
+    // holds θ*·exp(±|ln(θ_s/θ*)|) of its minimum θ_s.
+    const json& check = result.document.at("viscosity").at("alignment_check");
+    std::printf("[ identify ] alignment check: %s\n", check.dump().c_str());
+    ASSERT_TRUE(check.contains("theta_min")) << check.dump();
+    EXPECT_FALSE(check.at("from_checkpoint").get<bool>());
+    const double spread = std::abs(std::log(check.at("theta_min").get<double>() / result.theta[0]));
+    EXPECT_LE(result.interval[0][0], result.theta[0] * std::exp(-spread) * (1 + 1e-12));
+    EXPECT_GE(result.interval[0][1], result.theta[0] * std::exp(spread) * (1 - 1e-12));
+    EXPECT_EQ(result.intervalMethod, "profile+alignment");
     EXPECT_TRUE(fs::exists(dir_ / "out" / "result.json"));
     EXPECT_TRUE(fs::exists(dir_ / "out" / "checkpoint.json"));
     // Re-running a finished job does not simulate again and gives the same answer.
     const identify::IdentificationResult again = identify::identify(j, dir_ / "out", options);
     EXPECT_EQ(again.theta, result.theta);
     EXPECT_EQ(again.evaluations, result.evaluations);
+    const json& checkAgain = again.document.at("viscosity").at("alignment_check");
+    EXPECT_TRUE(checkAgain.at("from_checkpoint").get<bool>());
+    EXPECT_EQ(checkAgain.at("E"), check.at("E"));
+    EXPECT_EQ(again.interval, result.interval);
 }
 
 // A budget far below what the job needs: the coarse phase ends after its first generation, the
@@ -255,11 +269,11 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     EXPECT_EQ(warned[0].rfind("time_budget_s: the 2 full-fidelity generations", 0), 0u) << warned[0];
     EXPECT_EQ(budgetWarnings(result.document.at("warnings")), 1);
     // After the switch the estimate covers the full-fidelity generation still to come, not the
-    // budget's spent remainder.
+    // budget's spent remainder; at the end, the alignment check's two evaluations.
     ASSERT_EQ(remaining.size(), 3u);
     EXPECT_GT(remaining[0], 0.0);
-    EXPECT_GT(remaining[1], 0.0);
-    EXPECT_EQ(remaining[2], 0.0);
+    EXPECT_GT(remaining[1], remaining[2]);
+    EXPECT_GT(remaining[2], 0.0);
     std::printf("[ identify ] budget 0.5 s: stop %s after %d generations (%d coarse), %.1f s\n",
                 identify::toString(result.stop), result.generations,
                 result.document.at("coarse_generations").get<int>(), result.seconds);

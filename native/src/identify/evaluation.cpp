@@ -174,13 +174,18 @@ Observation firstPartOf(const Observation& observation, double share) {
     return part;
 }
 
-Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution) {
+Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution, double gridShift) {
     Scene scene = job.scene;
     for (size_t i = 0; i < job.parameters.size(); ++i) {
         if (job.parameters[i].name == "viscosity") scene.material.viscosity = theta.at(i);
         else if (job.parameters[i].name == "surface_tension") scene.material.surfaceTension = theta.at(i);
     }
     scene.domain.resolution = resolution;
+    const double shift = gridShift * scene.cellSize();
+    for (int a = 0; a < 2; ++a) {
+        scene.domain.min[a] += shift;
+        scene.domain.max[a] += shift;
+    }
     // Every evaluation uses the job's seed (common random numbers): E depends on θ and the
     // resolution only, never on which thread or in which order it ran.
     scene.seed = static_cast<unsigned>(job.seed);
@@ -189,14 +194,14 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 }
 
 Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
-                    const fs::path& fieldsDir) {
+                    const fs::path& fieldsDir, double gridShift) {
     using Clock = std::chrono::steady_clock;
     auto seconds = [](Clock::time_point from, Clock::time_point to) { return std::chrono::duration<double>(to - from).count(); };
     const auto start = Clock::now();
     Evaluation ev;
     ev.theta = theta;
     ev.resolution = resolution;
-    const Scene scene = sceneWithParameters(job, theta, resolution);
+    const Scene scene = sceneWithParameters(job, theta, resolution, gridShift);
     const auto setupStart = Clock::now();
     sim::Simulation simulation(scene);
     ev.simulationSeconds += seconds(setupStart, Clock::now());

@@ -181,6 +181,11 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": silhouette_method: expected \"fast\" or \"exact\"");
         job.exactSilhouettes = *method == "exact";
     }
+    if (doc.contains("alignment_check")) {
+        if (!doc.at("alignment_check").is_boolean())
+            throw InputError(origin + ": alignment_check: must be true or false");
+        job.alignmentCheck = doc.at("alignment_check").get<bool>();
+    }
     if (const auto comparison = optionalString(doc, "silhouette_comparison", origin))
         job.silhouetteComparison = parseSilhouetteComparison(*comparison, origin + ": silhouette_comparison");
     if (doc.contains("fidelity") && !doc.at("fidelity").is_null()) {
