@@ -246,8 +246,9 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
 
 // A budget far below what the job needs: the coarse phase ends after its first generation, the
 // minimum two full-fidelity generations run, and then the loop stops instead of starting
-// another; a warning at the switch says the budget will be overrun and by how much. A rerun with
-// the same budget evaluates nothing more and keeps the warning; without a budget it goes on.
+// another; a warning at the switch says the budget will be overrun and by how much, and one at the
+// end that the alignment check was left out. A rerun with the same budget evaluates nothing more
+// and keeps the warning; without a budget it goes on.
 TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     json doc = jobJson();
     doc["max_generations"] = 40;
@@ -265,8 +266,11 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
         for (const json& w : warnings) count += w.get<std::string>().rfind("time_budget_s:", 0) == 0;
         return count;
     };
-    ASSERT_EQ(warned.size(), 1u);
+    // ... and, at the end, that the alignment check does not fit either.
+    ASSERT_EQ(warned.size(), 2u);
     EXPECT_EQ(warned[0].rfind("time_budget_s: the 2 full-fidelity generations", 0), 0u) << warned[0];
+    EXPECT_EQ(warned[1].rfind("alignment_check: skipped", 0), 0u) << warned[1];
+    EXPECT_TRUE(result.document.at("viscosity").at("alignment_check").contains("skipped"));
     EXPECT_EQ(budgetWarnings(result.document.at("warnings")), 1);
     // After the switch the estimate covers the full-fidelity generation still to come, not the
     // budget's spent remainder; at the end, the alignment check's two evaluations.
