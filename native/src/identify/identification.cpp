@@ -55,6 +55,7 @@
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <sstream>
 
@@ -221,6 +222,31 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
                            : std::array<double, 2>{theta(lo), theta(hi)};
     info["theta_min"] = fit.vertex;
     return fit;
+}
+
+// Evaluates every θ at once on the arena. An unstable simulation gets E = ∞ and its message in
+// `errors` (it ranks last, and never aborts the run); bad input still throws.
+std::vector<Evaluation> evaluateAll(tbb::task_arena& arena, const Job& job, const Observation& obs,
+                                    const std::vector<std::vector<double>>& thetas, int resolution,
+                                    const std::function<fs::path(size_t)>& fieldsDir, double gridShift,
+                                    std::vector<std::string>& errors) {
+    std::vector<Evaluation> evals(thetas.size());
+    errors.assign(thetas.size(), "");
+    arena.execute([&] {
+        tbb::parallel_for(0, static_cast<int>(thetas.size()), 1, [&](int k) {
+            try {
+                evals[k] = evaluate(job, obs, thetas[k], resolution, fieldsDir(k), gridShift);
+            } catch (const InputError&) {
+                throw;
+            } catch (const std::exception& e) {
+                evals[k].theta = thetas[k];
+                evals[k].resolution = resolution;
+                evals[k].E = INFINITY;
+                errors[k] = e.what();
+            }
+        });
+    });
+    return evals;
 }
 
 // The alignment check. The grid resolves a scene's small features unevenly: the sample cup's hole
@@ -507,26 +533,15 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         // An injected mean is a zero step for CMA-ES's update (Hansen 2011, "Injecting external
         // solutions into CMA-ES"), so nothing else changes.
         if (g == coarseEnd && coarseEnd > 0) xs.back() = es.mean();
-        std::vector<Evaluation> evals(xs.size());
-        std::vector<std::string> errors(xs.size());
         const bool stageFields = options.writeFields && !coarse;
         const fs::path staging = outDir / kFieldsStaging;
         fs::remove_all(staging);  // what a killed generation left
         auto stagedFields = [&](size_t k) { return stageFields ? staging / std::to_string(k) : fs::path(); };
-        arena.execute([&] {
-            tbb::parallel_for(0, static_cast<int>(xs.size()), 1, [&](int k) {
-                try {
-                    evals[k] = evaluate(job, coarse ? coarseObs : obs, thetaOf(xs[k], bounds), resolution, stagedFields(k));
-                } catch (const InputError&) {
-                    throw;
-                } catch (const std::exception& e) {  // an unstable simulation ranks last, never aborts the run
-                    evals[k].theta = thetaOf(xs[k], bounds);
-                    evals[k].resolution = resolution;
-                    evals[k].E = INFINITY;
-                    errors[k] = e.what();
-                }
-            });
-        });
+        std::vector<std::vector<double>> thetas;
+        for (const Eigen::VectorXd& x : xs) thetas.push_back(thetaOf(x, bounds));
+        std::vector<std::string> errors;
+        const std::vector<Evaluation> evals =
+            evaluateAll(arena, job, coarse ? coarseObs : obs, thetas, resolution, stagedFields, 0.0, errors);
         if (g == 0) {
             double pixels = 0;
             for (const Evaluation& e : evals) pixels += e.simulatedPixels;
@@ -731,19 +746,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             } else {
                 if (!cached) {
                     const auto checkStart = Clock::now();
-                    std::array<double, 2> E{NAN, NAN};
-                    std::array<std::string, 2> errors;
-                    arena.execute([&] {
-                        tbb::parallel_for(0, 2, 1, [&](int k) {
-                            try {
-                                E[k] = evaluate(job, obs, {thetas[k]}, fineRes, {}, kAlignmentShift).E;
-                            } catch (const InputError&) {
-                                throw;
-                            } catch (const std::exception& e) {  // unstable: the check fails, the run does not
-                                errors[k] = e.what();
-                            }
-                        });
-                    });
+                    std::vector<std::string> errors;
+                    const std::vector<Evaluation> shifted =
+                        evaluateAll(arena, job, obs, {{thetas[0]}, {thetas[1]}}, fineRes,
+                                    [](size_t) { return fs::path(); }, kAlignmentShift, errors);
+                    const std::array<double, 2> E{shifted[0].E, shifted[1].E};
                     alignmentCheckSeconds = std::chrono::duration<double>(Clock::now() - checkStart).count();
                     check["seconds"] = alignmentCheckSeconds;
                     alignmentScores = {{"theta", thetas}, {"E", finiteOrNull(E)}, {"errors", errors}};
