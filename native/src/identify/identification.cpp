@@ -250,7 +250,7 @@ std::vector<Evaluation> evaluateAll(tbb::task_arena& arena, const Job& job, cons
 }
 
 // The alignment check. The grid resolves a scene's small features unevenly: the sample cup's hole
-// is 2.4 cells wide at 48³, and where the faces fall against its rim decides how much of it passes
+// is 2.4 cells in radius at 48³, and where the faces fall against its rim decides how much of it passes
 // flux (84–98 % of its area as the cup moved sideways by 0 to ½ cell) and so the drain (share out
 // by frame 8 at η = 1: 0.133 to 0.154; 0.126–0.133 moved upwards). That error is the
 // discretization's, not the fit's, and the profile band does not see it. So θ* and kAlignmentStep·θ*
@@ -486,8 +486,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // The alignment check's two evaluations, as a share of a full generation's rounds on the arena,
     // with the margin the minimum generations get (at η = 1 on the sample cup: 61.5 s measured where
     // half the mean full-fidelity generation, 55 s, was predicted).
+    const bool alignmentPlanned = job.alignmentCheck && n == 1;
     auto alignmentSeconds = [&] {
-        if (!job.alignmentCheck || n != 1) return 0.0;
+        if (!alignmentPlanned) return 0.0;
         const double threads = arena.max_concurrency();
         return kFineTimeMargin * fineGenerationSeconds() * std::ceil(2 / threads) / std::ceil(es.lambda() / threads);
     };
@@ -725,7 +726,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         // points, else the CMA band; always widened to contain θ*, and by the alignment check.
         std::array<double, 2> band = profile ? profile->interval : cma;
         std::optional<double> alignmentSpread;  // |ln(θ_s/θ*)|
-        if (job.alignmentCheck && n == 1) {
+        if (alignmentPlanned) {
             json check{{"grid_shift_cells", {kAlignmentShift, kAlignmentShift, 0.0}}};
             const std::array<double, 2> thetas{bestTheta, kAlignmentStep * bestTheta};
             // A rerun of a finished job (or one killed after the check) takes the scores from the
