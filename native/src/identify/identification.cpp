@@ -265,11 +265,8 @@ std::vector<Evaluation> evaluateAll(tbb::task_arena& arena, const Job& job, cons
 constexpr double kAlignmentShift = 0.5;  // cells along x and y
 constexpr double kAlignmentStep = 1.15;
 
-json finiteOrNull(const std::array<double, 2>& values) {
-    json out = json::array();
-    for (double v : values) out.push_back(std::isfinite(v) ? json(v) : json());
-    return out;
-}
+// E as JSON: null where a simulation failed (E = ∞), since JSON has no infinity.
+json finiteOrNull(double value) { return std::isfinite(value) ? json(value) : json(); }
 
 std::optional<double> shiftedMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
                                      const std::array<double, 2>& E) {
@@ -561,7 +558,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                    {"frames", coarse ? coarseFrames : fineFrames},
                    {"theta", vec(evals[k].theta)},
                    {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
-                   {"E", std::isfinite(evals[k].E) ? json(evals[k].E) : json()},
+                   {"E", finiteOrNull(evals[k].E)},
                    {"frame_E", vec(evals[k].frameE)},
                    {"frame_s", vec(evals[k].frameSeconds)},
                    {"seconds", evals[k].seconds},
@@ -590,7 +587,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         generations.push_back({{"generation", g + 1},
                                {"fidelity", fidelity},
                                {"resolution", resolution},
-                               {"generation_best_E", std::isfinite(evals[bestK].E) ? json(evals[bestK].E) : json()},
+                               {"generation_best_E", finiteOrNull(evals[bestK].E)},
                                {"generation_best_theta", vec(evals[bestK].theta)},
                                {"best_E", best ? best->at("E") : json()},
                                {"best_theta", best ? best->at("theta") : json()},
@@ -754,7 +751,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                     const std::array<double, 2> E{shifted[0].E, shifted[1].E};
                     alignmentCheckSeconds = std::chrono::duration<double>(Clock::now() - checkStart).count();
                     check["seconds"] = alignmentCheckSeconds;
-                    alignmentScores = {{"theta", thetas}, {"E", finiteOrNull(E)}, {"errors", errors}};
+                    alignmentScores = {{"theta", thetas},
+                                       {"E", json::array({finiteOrNull(E[0]), finiteOrNull(E[1])})},
+                                       {"errors", errors}};
                     checkpoint(Clock::now());
                 }
                 std::array<double, 2> E{NAN, NAN};
