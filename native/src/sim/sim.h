@@ -93,6 +93,11 @@ public:
     double time() const { return time_; }
     int frame() const { return frame_; }
     double liquidVolume() const;
+    // The pressure at cell c's centre (Pa) as the faces feel it: the solve's unknown scaled by the
+    // cell's liquid fraction W (its rows are W ∇·u), plus the Laplace pressure outside the liquid,
+    // W p + (1 − W) σκ. It is the unknown itself in full cells; beside the sample cup's wall
+    // (48³, W ≈ 0.46) the unknown alone reads about twice the hydrostatic pressure.
+    double cellPressure(int c) const;
     // Trilinear on the staggered grid; beyond the domain's walls, their ghosts (wallGhostRatio).
     Vec3 velocityAt(const Vec3& x) const;
     const SolidField& solids() const { return *solids_; }
@@ -121,6 +126,7 @@ private:
     VolumeFractions fractions_;
     Field liquidPhi_;                 // signed distance to the liquid surface at cell centres
     std::array<std::vector<char>, 3> validFace_;  // faces whose velocity came from particles or the solve
+    Field laplacePressure_;           // (1 − W) σκ at cells near the surface, this step's
     Field cellViscosity_;
     std::array<Field, 3> edgeViscosity_;
     std::vector<double> fineSolidFraction_;  // non-solid fraction of each half-cell, fixed in time

@@ -138,6 +138,7 @@ Simulation::Simulation(const Scene& scene)
     const Lattice cells = grid_.lattice(kCellCentre);
     state_.pressure = Field(cells);
     liquidPhi_ = Field(cells);
+    laplacePressure_ = Field(cells);
     cellViscosity_ = Field(cells, scene.material.viscosity);
     fractions_.cell = Field(cells);
     for (int a = 0; a < 3; ++a) {
@@ -542,9 +543,10 @@ void Simulation::applyBodyForces(double dt) {
 // Laplace pressure σκ, so the total pressure seen by a face is W p + (1 − W) σκ; its known part
 // (1 − W) σκ is applied here as a force before the solve.
 void Simulation::applySurfaceTension(double dt) {
+    const Lattice& cells = liquidPhi_.lattice;
+    laplacePressure_ = Field(cells);
     const double sigma = scene_.material.surfaceTension;
     if (sigma <= 0) return;
-    const Lattice& cells = liquidPhi_.lattice;
     const double dx = grid_.dx;
     // Curvature differentiates twice, so it is taken on OpenVDB's smoothed particle level set
     // (cell-aligned voxels); the kernel-averaged distance used for the fractions gave parasitic
@@ -570,7 +572,6 @@ void Simulation::applySurfaceTension(double dt) {
     const auto distanceAccess = levelSet->getConstAccessor();
     const openvdb::tools::GridSampler<openvdb::FloatGrid::ConstAccessor, openvdb::tools::BoxSampler> curvatureAt(
         curvatureAccess, curvature->transform());
-    Field pressureOutside(cells);
     forEachNearBox(cells, activeLo_, activeHi_, 1, [&](int c, const Vec3i& ijk) {
         if (fractions_.cell[c] >= 1) return;
         bool nearLiquid = fractions_.cell[c] >= kMinWeight;
@@ -590,7 +591,7 @@ void Simulation::applySurfaceTension(double dt) {
         if (normal.length() > 1e-6 && std::abs(phi) < 2 * dx) index -= (phi / dx) * normal.unitSafe();
         // OpenVDB returns the mean curvature (κ1 + κ2)/2; the Laplace pressure needs κ1 + κ2.
         const double kappa = 2.0 * curvatureAt.isSample(index);
-        pressureOutside[c] = (1 - fractions_.cell[c]) * sigma * std::clamp(kappa, -2 / dx, 2 / dx);
+        laplacePressure_[c] = (1 - fractions_.cell[c]) * sigma * std::clamp(kappa, -2 / dx, 2 / dx);
     });
     for (int a = 0; a < 3; ++a) {
         Field& u = state_.velocity[a];
@@ -600,7 +601,7 @@ void Simulation::applySurfaceTension(double dt) {
             if (lo < 0 || hi < 0) return;
             if (fractions_.cell[lo] < kMinWeight && fractions_.cell[hi] < kMinWeight) return;
             const double mass = scene_.material.density * std::max(fractions_.face[a][f], kMinMassFraction);
-            u[f] -= dt * (pressureOutside[hi] - pressureOutside[lo]) / (dx * mass);
+            u[f] -= dt * (laplacePressure_[hi] - laplacePressure_[lo]) / (dx * mass);
         });
     }
 }
@@ -673,6 +674,10 @@ double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) con
         if (gradient) *gradient += dw * sample;
     });
     return value;
+}
+
+double Simulation::cellPressure(int c) const {
+    return fractions_.cell[c] * state_.pressure[c] + laplacePressure_[c];
 }
 
 Vec3 Simulation::velocityAt(const Vec3& x) const {

@@ -51,7 +51,7 @@ struct StokesProblem {
 // The unknowns that persist between steps, so each solve starts from the last one's answer.
 struct StokesState {
     std::array<Field, 3> velocity;  // in: u* (after body forces); out: the new velocity
-    Field pressure;                 // Pa
+    Field pressure;                 // Pa, the solve's unknown (the liquid's share of a cut cell's is W × it)
     Field normalStress[3];          // τ_xx, τ_yy, τ_zz at cells
     std::array<Field, 3> shearStress;  // τ_yz, τ_xz, τ_xy on x-, y-, z-edges
 };

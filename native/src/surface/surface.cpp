@@ -68,7 +68,7 @@ void writeFrameVdb(const std::filesystem::path& file, const sim::Simulation& sim
         const Eigen::Vector3d v = simulation.velocityAt(grid.position(sim::kCellCentre, ijk));
         const openvdb::Coord coord(ijk[0], ijk[1], ijk[2]);
         vAccess.setValue(coord, openvdb::Vec3f(v.x(), v.y(), v.z()));
-        pAccess.setValue(coord, static_cast<float>(simulation.fields().pressure[c]));
+        pAccess.setValue(coord, static_cast<float>(simulation.cellPressure(c)));
     }
     openvdb::GridPtrVec grids{levelSet, velocity, pressure};
     openvdb::io::File out(file.string());
