@@ -543,10 +543,10 @@ void Simulation::applyBodyForces(double dt) {
 // Laplace pressure σκ, so the total pressure seen by a face is W p + (1 − W) σκ; its known part
 // (1 − W) σκ is applied here as a force before the solve.
 void Simulation::applySurfaceTension(double dt) {
-    const Lattice& cells = liquidPhi_.lattice;
-    laplacePressure_ = Field(cells);
+    std::fill(laplacePressure_.values.begin(), laplacePressure_.values.end(), 0.0);
     const double sigma = scene_.material.surfaceTension;
     if (sigma <= 0) return;
+    const Lattice& cells = liquidPhi_.lattice;
     const double dx = grid_.dx;
     // Curvature differentiates twice, so it is taken on OpenVDB's smoothed particle level set
     // (cell-aligned voxels); the kernel-averaged distance used for the fractions gave parasitic
