@@ -171,8 +171,12 @@ void multiply(const SparseRows& a, const Vec& x, Vec& y) {
                       });
 }
 
+// The deterministic reduce splits the range the same way at any thread count and on every run, so
+// the sums, and the simulation, do not depend on how the work was scheduled. With parallel_reduce
+// two runs of one 48³ simulation of the sample cup differed by 10⁻⁵ m/s after a frame, and after 24
+// one particle had moved 5 cm apart.
 double dot(const Vec& a, const Vec& b) {
-    return tbb::parallel_reduce(
+    return tbb::parallel_deterministic_reduce(
         tbb::blocked_range<Eigen::Index>(0, a.size(), 8192), 0.0,
         [&](const tbb::blocked_range<Eigen::Index>& r, double sum) {
             return sum + a.segment(r.begin(), r.size()).dot(b.segment(r.begin(), r.size()));
@@ -222,6 +226,39 @@ CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, c
     return result;
 }
 
+// The pressure rows whose liquid can change its volume: those joined, through faces two pressure
+// rows share, to a face only one of them holds (a face onto air). Liquid that fills a sealed region
+// (a closed box, a periodic pipe) cannot: the vector x_c = 1/W_c is then in the system's null space
+// (Hᵀx is the plain divergence summed over the region, whose flux cancels), so a divergence target
+// there is inconsistent and CG diverges; a full periodic pipe lost 99 % of its liquid in a frame.
+std::vector<char> rowsThatCanChangeVolume(const std::vector<Row>& rows, const FaceUnknowns& u) {
+    std::vector<int> parent(rows.size());
+    for (size_t r = 0; r < rows.size(); ++r) parent[r] = static_cast<int>(r);
+    auto root = [&](int r) {
+        while (parent[r] != r) r = parent[r] = parent[parent[r]];
+        return r;
+    };
+    std::vector<int> firstRow(u.faceOfDof.size(), -1);
+    std::vector<char> shared(u.faceOfDof.size(), 0);
+    for (size_t r = 0; r < rows.size(); ++r) {
+        if (rows[r].kind != Row::Pressure) continue;
+        for (const Term& t : rows[r].terms) {
+            const int d = u.dofOfFace[t.axis][t.face];
+            if (firstRow[d] < 0) {
+                firstRow[d] = static_cast<int>(r);
+            } else {
+                parent[root(static_cast<int>(r))] = root(firstRow[d]);
+                shared[d] = 1;
+            }
+        }
+    }
+    std::vector<char> open(rows.size(), 0);
+    for (size_t d = 0; d < firstRow.size(); ++d)
+        if (firstRow[d] >= 0 && !shared[d]) open[root(firstRow[d])] = 1;
+    for (size_t r = 0; r < rows.size(); ++r) open[r] = rows[r].kind == Row::Pressure && open[root(static_cast<int>(r))];
+    return open;
+}
+
 Vec gatherVelocity(const StokesState& s, const FaceUnknowns& u) {
     Vec v(u.faceOfDof.size());
     for (size_t d = 0; d < u.faceOfDof.size(); ++d) v[d] = s.velocity[u.faceOfDof[d].first][u.faceOfDof[d].second];
@@ -256,9 +293,11 @@ CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vect
     Vec b;
     multiply(h, uStar, b);
     // Pressure rows are −W_p ∇·u; aiming at ∇·u = d moves W_p d to the right-hand side.
-    if (p.divergence != 0)
+    if (p.divergence != 0) {
+        const std::vector<char> open = rowsThatCanChangeVolume(rows, u);
         for (size_t r = 0; r < rows.size(); ++r)
-            if (rows[r].kind == Row::Pressure) b[r] += p.weights->cell[rows[r].sample] * p.divergence;
+            if (open[r]) b[r] += p.weights->cell[rows[r].sample] * p.divergence;
+    }
 
     Vec diagonal = compliance;
     for (int r = 0; r < h.outerSize(); ++r)
