@@ -386,13 +386,11 @@ void Simulation::computeFractions() {
     std::vector<Vec3> weightedPosition(cells.count(), Vec3::Zero());
     // A particle lies in its cell, so cells |d| away are at least (|d| − ½) Δx from it.
     const int span = static_cast<int>(std::ceil(kKernelRadius - 0.5));
-    // Within the kernel's reach of a wall, x̄ leans away from it, since no particle lies beyond it:
-    // φ then read about −0.15 Δx instead of −0.45 Δx in cells beside a wall, and the grid saw 3.5 %
-    // of the liquid within a cell of a round pipe's wall as air, which weakened the wall's drag (the
-    // pipe's Poiseuille flux +2.0 % at 7.2 cells across its radius; +0.9 % with that liquid counted).
-    // Each such particle is therefore mirrored into the wall, as if the liquid went on through it:
-    // a wall then meets the liquid at the liquid's own density, and a free surface at a right angle.
-    // A mirror that would land beyond a thin wall (the cup's bottom is 1.3 cells thick at 48³) is
+    // Within the kernel's reach of a wall, x̄ leans away from it, since no particle lies beyond it, and
+    // φ reads less deep than the liquid is: the grid saw 3.5 % of the liquid within a cell of a round
+    // pipe's wall as air, which weakened the wall's drag (the pipe's Poiseuille flux +2.0 % at 7.2
+    // cells across its radius; +0.86 % with the mirrors). Each such particle is therefore mirrored
+    // into the wall, as if the liquid went on through it. A mirror that would land beyond a thin wall (the cup's bottom is 1.3 cells thick at 48³) is
     // left out, so that no liquid appears on the wall's far side.
     std::vector<Vec3> mirrors(particles_.position.size(), Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
     tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
