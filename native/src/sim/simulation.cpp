@@ -390,8 +390,9 @@ void Simulation::computeFractions() {
     // φ reads less deep than the liquid is: the grid saw 3.5 % of the liquid within a cell of a round
     // pipe's wall as air, which weakened the wall's drag (the pipe's Poiseuille flux +2.0 % at 7.2
     // cells across its radius; +0.86 % with the mirrors). Each such particle is therefore mirrored
-    // into the wall, as if the liquid went on through it. A mirror that would land beyond a thin wall (the cup's bottom is 1.3 cells thick at 48³) is
-    // left out, so that no liquid appears on the wall's far side.
+    // into the wall, as if the liquid went on through it. A mirror that would land beyond a thin wall
+    // (the cup's bottom is 1.3 cells thick at 48³) is left out, so that no liquid appears on the
+    // wall's far side. Particles without a mirror keep a NaN one, which the splat skips.
     std::vector<Vec3> mirrors(particles_.position.size(), Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
     tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
         const Vec3& x = particles_.position[p];
