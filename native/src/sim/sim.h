@@ -107,6 +107,7 @@ private:
     void emit(double dt);
     void transferToGrid();
     void computeFaceOpenings();
+    std::vector<Vec3> wallImages(double reach) const;
     void computeFractions();
     void extrapolateVelocity(int layers);
     double velocityComponentAt(int axis, const Vec3& x, Vec3* gradient) const;

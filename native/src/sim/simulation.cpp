@@ -376,6 +376,30 @@ void Simulation::transferToGrid() {
     }
 }
 
+// The mirror images, across the nearest wall, of the particles within `reach` of a solid: the liquid
+// as if it went on through the wall. An image that would land beyond a thin wall (the cup's bottom
+// is 1.3 cells thick at 48³) is left out, so that no liquid appears on the wall's far side. In
+// particle order, whatever the thread count.
+std::vector<Vec3> Simulation::wallImages(double reach) const {
+    const Lattice& cells = liquidPhi_.lattice;
+    const double dx = grid_.dx;
+    std::vector<Vec3> images(particles_.position.size(), Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
+    tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
+        const Vec3& x = particles_.position[p];
+        if (!x.allFinite()) return;
+        // Distances are 1-Lipschitz: the cell centre's rules out most particles without a query.
+        Vec3i c = ((x - grid_.origin) / dx).array().floor().cast<int>();
+        if (cells.resolve(c) && cellSolidDistance_[cells.index(c[0], c[1], c[2])] - dx >= reach) return;
+        const double d = solids_->distance(x);
+        if (d >= reach) return;
+        const Vec3 image = x - 2 * d * solids_->normal(x);
+        if (solids_->distance(image) < 0) images[p] = image;
+    });
+    images.erase(std::remove_if(images.begin(), images.end(), [](const Vec3& v) { return !v.allFinite(); }),
+                 images.end());
+    return images;
+}
+
 // The liquid's signed distance at cell centres from the particles, after Zhu & Bridson 2005:
 // φ(x) = |x − x̄(x)| − r, with x̄ a kernel-weighted mean of nearby particles. Unlike a union of
 // spheres this gives flat surfaces where the particles lie flat, and no gaps inside the bulk.
@@ -389,19 +413,9 @@ void Simulation::computeFractions() {
     // Within the kernel's reach of a wall, x̄ leans away from it, since no particle lies beyond it, and
     // φ reads less deep than the liquid is: the grid saw 3.5 % of the liquid within a cell of a round
     // pipe's wall as air, which weakened the wall's drag (the pipe's Poiseuille flux +2.0 % at 7.2
-    // cells across its radius; +0.86 % with the mirrors). Each such particle is therefore mirrored
-    // into the wall, as if the liquid went on through it. A mirror that would land beyond a thin wall
-    // (the cup's bottom is 1.3 cells thick at 48³) is left out, so that no liquid appears on the
-    // wall's far side. Particles without a mirror keep a NaN one, which the splat skips.
-    std::vector<Vec3> mirrors(particles_.position.size(), Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
-    tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
-        const Vec3& x = particles_.position[p];
-        if (!x.allFinite()) return;
-        const double d = solids_->distance(x);
-        if (d >= reach) return;
-        const Vec3 m = x - 2 * d * solids_->normal(x);
-        if (solids_->distance(m) < 0) mirrors[p] = m;
-    });
+    // cells across its radius; +0.86 % with the images). The particles' wall images therefore count
+    // too: cut cells at walls read as full of liquid, and the non-solid fraction removes the part
+    // inside the wall.
     auto splat = [&](const Vec3& x) {
         if (!x.allFinite()) return;  // advanceFrame reports a blow-up; never index with it
         const Vec3i base = ((x - grid_.origin) / dx).array().floor().cast<int>();
@@ -421,21 +435,9 @@ void Simulation::computeFractions() {
                 }
     };
     for (const Vec3& x : particles_.position) splat(x);
-    for (const Vec3& x : mirrors) splat(x);
+    for (const Vec3& x : wallImages(reach)) splat(x);
     for (int c = 0; c < cells.count(); ++c)
         liquidPhi_[c] = kernelSum[c] > 0 ? std::min((weightedPosition[c] / kernelSum[c]).norm() - radius, 3 * dx) : 3 * dx;
-    // Extend the liquid one cell into solids so that cut cells at walls read as full of liquid;
-    // the non-solid fraction then removes the part inside the wall.
-    Field extended = liquidPhi_;
-    for (int c = 0; c < cells.count(); ++c) {
-        if (cellSolidDistance_[c] >= 0) continue;
-        const Vec3i ijk = cells.coords(c);
-        for (int a = 0; a < 3; ++a)
-            for (int d : {-1, 1})
-                if (const int nb = cells.neighbour(ijk, a, d); nb >= 0 && cellSolidDistance_[nb] >= 0)
-                    extended[c] = std::min(extended[c], liquidPhi_[nb]);
-    }
-    liquidPhi_ = std::move(extended);
 
     // Only the cells around the particles can hold liquid: the fractions are computed inside the
     // particles' bounding box grown by the kernel reach, and are zero elsewhere.
@@ -573,16 +575,8 @@ void Simulation::applySurfaceTension(double dt) {
     // angle (neutral wetting) instead of rounding off over it like a free edge: that false bend at
     // every contact line drove the largest parasitic currents in a resting pool (8.7 → 5.7 mm/s).
     std::vector<Vec3> surfacePoints = particles_.position;
-    const double mirrorReach = (kSurfaceParticleRadius + kCurvatureBandWidth + 1) * dx;
-    for (const Vec3& x : particles_.position) {
-        // Distances are 1-Lipschitz: the cell centre's rules out most particles without a query.
-        Vec3i c = ((x - grid_.origin) / dx).array().floor().cast<int>();
-        if (cells.resolve(c) && cellSolidDistance_[cells.index(c[0], c[1], c[2])] - dx >= mirrorReach) continue;
-        const double d = solids_->distance(x);
-        if (d >= mirrorReach) continue;
-        const Vec3 image = x - 2 * d * solids_->normal(x);
-        if (solids_->distance(image) < 0) surfacePoints.push_back(image);  // not through a thin wall
-    }
+    const std::vector<Vec3> images = wallImages((kSurfaceParticleRadius + kCurvatureBandWidth + 1) * dx);
+    surfacePoints.insert(surfacePoints.end(), images.begin(), images.end());
     auto levelSet = particleLevelSet(surfacePoints, kSurfaceParticleRadius * dx, dx, grid_.origin,
                                      kCurvatureSmoothing, kCurvatureBandWidth);
     const auto curvature = openvdb::tools::meanCurvature(*levelSet);
