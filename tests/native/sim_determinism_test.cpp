@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <cstdio>
 
 using namespace viscoscope;
