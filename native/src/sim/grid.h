@@ -66,6 +66,14 @@ struct Grid {
         return origin + dx * Vec3(c[0] + 0.5 * s[0], c[1] + 0.5 * s[1], c[2] + 0.5 * s[2]);
     }
     Vec3 extent() const { return dx * cells.cast<double>(); }
+    // The shortest of the offsets that periodic images make of `offset`: a wrapped lattice index
+    // across a periodic seam lies a whole period away from the sample it stands for.
+    Vec3 nearestImage(Vec3 offset) const {
+        const Vec3 period = extent();
+        for (int a = 0; a < 3; ++a)
+            if (periodic[a]) offset[a] -= period[a] * std::round(offset[a] / period[a]);
+        return offset;
+    }
 };
 
 // A scalar field on one lattice.

@@ -364,7 +364,7 @@ void Simulation::transferToGrid() {
             const double vp = particles_.velocity[p][a];
             const Eigen::RowVector3d cp = particles_.affine[p].row(a);
             forEachStencilSample(grid_, u.lattice, x, [&](int f, double w, const Vec3&) {
-                const Vec3 offset = grid_.position(kFace[a], u.lattice.coords(f)) - x;
+                const Vec3 offset = grid_.nearestImage(grid_.position(kFace[a], u.lattice.coords(f)) - x);
                 u[f] += w * (vp + cp * offset);
                 weight[f] += w;
             });
