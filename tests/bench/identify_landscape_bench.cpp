@@ -1,0 +1,88 @@
+// The objective's landscape E(θ) of an identify job on grids moved sideways by fractions of a cell:
+// how much of where the minimum lies is the discretization's placement against the scene, not the
+// liquid. Evaluates every (θ, shift) pair of the job's first parameter at the job's resolution
+// (exactly as identify's full-fidelity evaluations, all cores), prints E per pair, each shift's
+// minimum of a parabola in 1/θ (ln θ for parameters other than viscosity), and the minimum of
+// the mean over the shifts.
+//
+//   identify_landscape_bench --job JOB.json --work DIR --thetas 7,8,9,10,11,12.5 [--shifts 0,0.25,0.5,0.75]
+//
+// DIR holds the extracted reference silhouettes (an identify --out folder is reused as it is).
+#include "identify/identify.h"
+
+#include <CLI/CLI.hpp>
+#include <Eigen/Dense>
+#include <openvdb/openvdb.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <cstdio>
+
+using namespace viscoscope;
+
+namespace {
+
+// The vertex of the least-squares parabola E ≈ a + b u + c u², or NaN when it opens downwards.
+double parabolaVertex(const std::vector<double>& u, const std::vector<double>& E) {
+    Eigen::MatrixXd A(u.size(), 3);
+    Eigen::VectorXd y(u.size());
+    for (size_t i = 0; i < u.size(); ++i) {
+        A.row(i) << 1, u[i], u[i] * u[i];
+        y[i] = E[i];
+    }
+    const Eigen::Vector3d coefficients = A.colPivHouseholderQr().solve(y);
+    return coefficients[2] > 0 ? -coefficients[1] / (2 * coefficients[2]) : NAN;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"E(θ) of an identify job on grids moved sideways by fractions of a cell"};
+    std::string jobFile, work;
+    std::vector<double> thetas, shifts{0, 0.25, 0.5, 0.75};
+    app.add_option("--job", jobFile, "job.json")->required();
+    app.add_option("--work", work, "folder for the extracted reference")->required();
+    app.add_option("--thetas", thetas, "values of the job's first parameter")->required()->delimiter(',');
+    app.add_option("--shifts", shifts, "grid shifts along x and y, in cells")->delimiter(',');
+    CLI11_PARSE(app, argc, argv);
+    try {
+        openvdb::initialize();
+        identify::Job job = identify::loadJob(jobFile);
+        identify::prepareReference(job, work);
+        const identify::Observation observation = identify::loadObservation(job);
+        const size_t n = thetas.size(), m = shifts.size();
+        std::vector<double> E(n * m);
+        tbb::parallel_for(size_t(0), n * m, [&](size_t k) {
+            std::vector<double> point{thetas[k / m]};  // the other parameters at their initial values
+            for (size_t p = 1; p < job.parameters.size(); ++p) point.push_back(job.parameters[p].initial);
+            E[k] = identify::evaluate(job, observation, point, job.resolution, {}, shifts[k % m]).E;
+        });
+        const bool inverse = job.parameters.front().name == "viscosity";
+        auto u = [&](double t) { return inverse ? 1 / t : std::log(t); };
+        auto theta = [&](double v) { return inverse ? 1 / v : std::exp(v); };
+        std::printf("%10s", "θ \\ shift");
+        for (double s : shifts) std::printf(" %9.3f", s);
+        std::printf(" %9s\n", "mean");
+        std::vector<double> us, mean(n, 0.0);
+        for (size_t i = 0; i < n; ++i) {
+            std::printf("%10.4g", thetas[i]);
+            for (size_t j = 0; j < m; ++j) {
+                std::printf(" %9.5f", E[i * m + j]);
+                mean[i] += E[i * m + j] / m;
+            }
+            std::printf(" %9.5f\n", mean[i]);
+            us.push_back(u(thetas[i]));
+        }
+        std::printf("%10s", "minimum");
+        for (size_t j = 0; j < m; ++j) {
+            std::vector<double> column;
+            for (size_t i = 0; i < n; ++i) column.push_back(E[i * m + j]);
+            std::printf(" %9.4g", theta(parabolaVertex(us, column)));
+        }
+        std::printf(" %9.4g\n", theta(parabolaVertex(us, mean)));
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "identify_landscape_bench: %s\n", e.what());
+        return 2;
+    }
+    return 0;
+}
