@@ -285,12 +285,13 @@ TEST(Physics, PipeFullOfLiquidCarriesPoiseuilleFlux) {
 // wavenumber k_h² = (4/Δx²) sin²(kΔx/2). Measured: −0.02 % from it, and −6.5 % with the offsets
 // taken at face value.
 TEST(Physics, ShearWaveDecaysAtTheViscousRateAcrossPeriodicSeams) {
-    const double eta = 1.0, rho = 1000, amplitude = 0.05, length = 0.04, k = 2 * M_PI / length;
+    const double eta = 1.0, rho = 1000, amplitude = 0.05, length = 0.04, k = 2 * M_PI / length, fps = 120;
+    const int frames = 4;
     json doc = baseScene(eta, 16);
     doc["domain"]["periodic"] = {true, true, true};
     doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {length, length, length}}});
     doc["gravity"] = {0, 0, 0};
-    doc["fps"] = 120;
+    doc["fps"] = fps;
     sim::Simulation s(parseScene(doc, "shear wave"));
     sim::Particles& particles = s.particles();
     for (size_t i = 0; i < particles.position.size(); ++i) {
@@ -301,9 +302,9 @@ TEST(Physics, ShearWaveDecaysAtTheViscousRateAcrossPeriodicSeams) {
     }
     const double dx = s.grid().dx, rate = eta / rho * 4 / (dx * dx) * std::pow(std::sin(0.5 * k * dx), 2);
     double expected = 1, worst = 0;
-    for (int f = 0; f < 4; ++f) {
+    for (int f = 0; f < frames; ++f) {
         const sim::FrameStats frame = s.advanceFrame();
-        expected *= std::pow(1 + rate / (120.0 * frame.steps), -frame.steps);
+        expected *= std::pow(1 + rate / (fps * frame.steps), -frame.steps);
         worst = std::max(worst, maxParticleSpeed(s));
     }
     double projection = 0, norm = 0;  // least-squares amplitude of u_x on sin(kz)
@@ -315,8 +316,8 @@ TEST(Physics, ShearWaveDecaysAtTheViscousRateAcrossPeriodicSeams) {
     const double kept = projection / norm / amplitude;
     std::printf("shear wave: amplitude kept %.4f after %.3f s, backward Euler %.4f (%+.2f %%), exact %.4f; "
                 "fastest particle %.4f m/s of %.4f\n",
-                kept, 4 / 120.0, expected, 100 * (kept / expected - 1),
-                std::exp(-eta / rho * k * k * 4 / 120.0), worst, amplitude);
+                kept, frames / fps, expected, 100 * (kept / expected - 1),
+                std::exp(-eta / rho * k * k * frames / fps), worst, amplitude);
     EXPECT_NEAR(kept / expected, 1.0, 0.01);
     EXPECT_LT(worst, amplitude);
 }
