@@ -2,8 +2,8 @@
 // how much of where the minimum lies is the discretization's placement against the scene, not the
 // liquid. Evaluates every (θ, shift) pair of the job's first parameter at the job's resolution
 // (exactly as identify's full-fidelity evaluations, all cores), prints E per pair, each shift's
-// minimum of a parabola in 1/θ (ln θ for parameters other than viscosity), and the minimum of
-// the mean over the shifts.
+// minimum of identify's profile parabola (in 1/θ for viscosity, else ln θ), and the minimum of the
+// mean over the shifts.
 //
 //   identify_landscape_bench --job JOB.json --work DIR --thetas 7,8,9,10,11,12.5 [--shifts 0,0.25,0.5,0.75]
 //
@@ -11,27 +11,28 @@
 #include "identify/identify.h"
 
 #include <CLI/CLI.hpp>
-#include <Eigen/Dense>
 #include <openvdb/openvdb.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 using namespace viscoscope;
 
 namespace {
 
-// The vertex of the least-squares parabola E ≈ a + b u + c u², or NaN when it opens downwards.
-double parabolaVertex(const std::vector<double>& u, const std::vector<double>& E) {
-    Eigen::MatrixXd A(u.size(), 3);
-    Eigen::VectorXd y(u.size());
-    for (size_t i = 0; i < u.size(); ++i) {
-        A.row(i) << 1, u[i], u[i] * u[i];
-        y[i] = E[i];
-    }
-    const Eigen::Vector3d coefficients = A.colPivHouseholderQr().solve(y);
-    return coefficients[2] > 0 ? -coefficients[1] / (2 * coefficients[2]) : NAN;
+// θ at the vertex of identify's profile parabola through all of the points, centred on the lowest.
+std::string profileMinimum(const std::vector<double>& thetas, const std::vector<double>& E, bool inverse) {
+    std::vector<std::pair<double, double>> points;
+    for (size_t i = 0; i < thetas.size(); ++i) points.emplace_back(thetas[i], E[i]);
+    const size_t lowest = std::min_element(E.begin(), E.end()) - E.begin();
+    nlohmann::json info;
+    const auto fit = identify::fitProfile(points, thetas[lowest], INFINITY, inverse, info);
+    char text[32];
+    std::snprintf(text, sizeof text, "%.4g", fit ? fit->vertex : NAN);
+    return text;
 }
 
 }  // namespace
@@ -42,9 +43,13 @@ int main(int argc, char** argv) {
     std::vector<double> thetas, shifts{0, 0.25, 0.5, 0.75};
     app.add_option("--job", jobFile, "job.json")->required();
     app.add_option("--work", work, "folder for the extracted reference")->required();
-    app.add_option("--thetas", thetas, "values of the job's first parameter")->required()->delimiter(',');
+    app.add_option("--thetas", thetas, "values of the job's first parameter (five or more for the minima)")
+        ->required()
+        ->delimiter(',');
     app.add_option("--shifts", shifts, "grid shifts along x and y, in cells")->delimiter(',');
     CLI11_PARSE(app, argc, argv);
+    if (!std::all_of(thetas.begin(), thetas.end(), [](double t) { return std::isfinite(t) && t > 0; }))
+        return std::fprintf(stderr, "identify_landscape_bench: --thetas: every value must be positive and finite\n"), 2;
     try {
         openvdb::initialize();
         identify::Job job = identify::loadJob(jobFile);
@@ -58,12 +63,10 @@ int main(int argc, char** argv) {
             E[k] = identify::evaluate(job, observation, point, job.resolution, {}, shifts[k % m]).E;
         });
         const bool inverse = job.parameters.front().name == "viscosity";
-        auto u = [&](double t) { return inverse ? 1 / t : std::log(t); };
-        auto theta = [&](double v) { return inverse ? 1 / v : std::exp(v); };
         std::printf("%10s", "θ \\ shift");
         for (double s : shifts) std::printf(" %9.3f", s);
         std::printf(" %9s\n", "mean");
-        std::vector<double> us, mean(n, 0.0);
+        std::vector<double> mean(n, 0.0);
         for (size_t i = 0; i < n; ++i) {
             std::printf("%10.4g", thetas[i]);
             for (size_t j = 0; j < m; ++j) {
@@ -71,15 +74,14 @@ int main(int argc, char** argv) {
                 mean[i] += E[i * m + j] / m;
             }
             std::printf(" %9.5f\n", mean[i]);
-            us.push_back(u(thetas[i]));
         }
         std::printf("%10s", "minimum");
         for (size_t j = 0; j < m; ++j) {
             std::vector<double> column;
             for (size_t i = 0; i < n; ++i) column.push_back(E[i * m + j]);
-            std::printf(" %9.4g", theta(parabolaVertex(us, column)));
+            std::printf(" %9s", profileMinimum(thetas, column, inverse).c_str());
         }
-        std::printf(" %9.4g\n", theta(parabolaVertex(us, mean)));
+        std::printf(" %9s\n", profileMinimum(thetas, mean, inverse).c_str());
     } catch (const std::exception& e) {
         std::fprintf(stderr, "identify_landscape_bench: %s\n", e.what());
         return 2;

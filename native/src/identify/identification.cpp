@@ -163,66 +163,6 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
                          " image or lie behind the camera)");
 }
 
-// The profile of E around the best full-fidelity evaluation θ_b of a single parameter: a
-// least-squares parabola E ≈ a + b u + c u² over the evaluations with |ln θ − ln θ_b| ≤ `range`.
-// For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
-// the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
-// its valley is steeper below the truth than above, and a parabola there puts the vertex high
-// (measured: +2.3 % and +10.1 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
-// parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
-// 2 × the RMS residual of the fit (the jitter in E), at least 1 % of E_min.
-struct ProfileFit {
-    double vertex = 0;                 // θ at the parabola's minimum
-    std::array<double, 2> interval{};  // θ
-    bool vertexAmongPoints = false;    // within the span of the fitted points (no extrapolation)
-    double curvature = 0;              // c of E ≈ a + b u + c u²
-};
-
-std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
-                                     double range, bool inverse, json& info) {
-    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
-    const auto theta = [&](double value) { return inverse ? 1 / value : std::exp(value); };
-    std::vector<std::pair<double, double>> near;
-    for (const auto& p : points)
-        if (std::abs(std::log(p.first / thetaBest)) <= range && std::isfinite(p.second))
-            near.emplace_back(u(p.first) - u(thetaBest), p.second);
-    info["points"] = near.size();
-    info["variable"] = inverse ? "1/θ" : "ln θ";
-    if (near.size() < 5) return std::nullopt;
-    Eigen::MatrixXd A(near.size(), 3);
-    Eigen::VectorXd y(near.size());
-    double lowest = INFINITY, highest = -INFINITY;
-    for (size_t i = 0; i < near.size(); ++i) {
-        A.row(i) << 1, near[i].first, near[i].first * near[i].first;
-        y[i] = near[i].second;
-        lowest = std::min(lowest, near[i].first);
-        highest = std::max(highest, near[i].first);
-    }
-    const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
-    const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
-    const double rSquared = 1 - (A * coef - y).squaredNorm() / (y.array() - y.mean()).square().sum();
-    info["coefficients"] = {coef[0], coef[1], coef[2]};
-    info["rms_residual"] = rms;
-    info["r_squared"] = rSquared;
-    if (!(coef[2] > 0)) return std::nullopt;
-    const double u0 = -coef[1] / (2 * coef[2]);
-    const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
-    const double dE = std::max(2 * rms, 0.01 * std::abs(eMin));
-    const double half = std::sqrt(dE / coef[2]);
-    const double uMin = u(thetaBest) + u0;
-    info["delta_E"] = dE;
-    if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
-    ProfileFit fit;
-    fit.vertex = theta(uMin);
-    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
-    fit.curvature = coef[2];
-    const double lo = uMin - half, hi = uMin + half;
-    // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
-    fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
-                           : std::array<double, 2>{theta(lo), theta(hi)};
-    info["theta_min"] = fit.vertex;
-    return fit;
-}
 
 // Evaluates every θ at once on the arena. An unstable simulation gets E = ∞ and its message in
 // `errors` (it ranks last, and never aborts the run); bad input still throws.
@@ -332,6 +272,52 @@ std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count) 
 }
 
 }  // namespace
+
+std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
+                                     double range, bool inverse, json& info) {
+    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    const auto theta = [&](double value) { return inverse ? 1 / value : std::exp(value); };
+    std::vector<std::pair<double, double>> near;
+    for (const auto& p : points)
+        if (std::abs(std::log(p.first / thetaBest)) <= range && std::isfinite(p.second))
+            near.emplace_back(u(p.first) - u(thetaBest), p.second);
+    info["points"] = near.size();
+    info["variable"] = inverse ? "1/θ" : "ln θ";
+    if (near.size() < 5) return std::nullopt;
+    Eigen::MatrixXd A(near.size(), 3);
+    Eigen::VectorXd y(near.size());
+    double lowest = INFINITY, highest = -INFINITY;
+    for (size_t i = 0; i < near.size(); ++i) {
+        A.row(i) << 1, near[i].first, near[i].first * near[i].first;
+        y[i] = near[i].second;
+        lowest = std::min(lowest, near[i].first);
+        highest = std::max(highest, near[i].first);
+    }
+    const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
+    const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
+    const double rSquared = 1 - (A * coef - y).squaredNorm() / (y.array() - y.mean()).square().sum();
+    info["coefficients"] = {coef[0], coef[1], coef[2]};
+    info["rms_residual"] = rms;
+    info["r_squared"] = rSquared;
+    if (!(coef[2] > 0)) return std::nullopt;
+    const double u0 = -coef[1] / (2 * coef[2]);
+    const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
+    const double dE = std::max(2 * rms, 0.01 * std::abs(eMin));
+    const double half = std::sqrt(dE / coef[2]);
+    const double uMin = u(thetaBest) + u0;
+    info["delta_E"] = dE;
+    if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
+    ProfileFit fit;
+    fit.vertex = theta(uMin);
+    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
+    fit.curvature = coef[2];
+    const double lo = uMin - half, hi = uMin + half;
+    // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
+    fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
+                           : std::array<double, 2>{theta(lo), theta(hi)};
+    info["theta_min"] = fit.vertex;
+    return fit;
+}
 
 LogSearchSpace logSearchSpace(const Job& job) {
     const int n = static_cast<int>(job.parameters.size());
