@@ -277,6 +277,52 @@ TEST(Physics, PipeFullOfLiquidCarriesPoiseuilleFlux) {
     EXPECT_LT(std::abs(volumeDrift), 0.01);
 }
 
+// 2b. Stokes flow through the sample cup's hole (radius 9 mm, bottom 5 mm) with liquid on both
+// sides: the bottom spans the box, which is periodic along z, and gravity drives the liquid
+// through the hole. The flux must hardly depend on whether the bottom's underside lies a hair
+// above or below a row of z-faces. A face a hair outside the solid beside a cell with no non-solid
+// volume used to stay open, and the solve took that cell for air: the flux read 25–28× higher a
+// thousandth of a cell above the row than below it. Measured now: −0.05 % with the hole's axis on a
+// column of z-faces, and +6 % with it between columns, where the faces under the hole's rim are
+// open above the row (partly, to the hole) and shut below it. Dagan, Weinbaum & Pfeffer's
+// orifice flux Δp/(η (3/r³ + 8t/(π r⁴))), printed for scale, is not claimed: at 2.4 cells across
+// the hole's radius the grid carries 1.3–1.6× as much, depending on where the hole sits.
+TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
+    const double radius = 0.009, bottom = 0.005, width = 0.12, length = 0.06, rho = 1000, eta = 100, g = 9.81;
+    const int resolution = 32;  // Δx = 3.75 mm, as the sample cup's at 48³
+    const double dx = width / resolution;
+    auto flux = [&](double sideways, double lift) {
+        json doc = baseScene(eta, resolution);
+        doc["domain"] = {{"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}},
+                         {"resolution", resolution}, {"periodic", {false, false, true}}};
+        // Walls thicker than the box's half-diagonal: below the cup's bottom the liquid fills the
+        // box, above it the cup.
+        doc["solids"] = {{{"type", "cup"}, {"position", {sideways * dx, sideways * dx, (8 + lift) * dx}},
+                          {"inner_radius", 0.043}, {"height", 3}, {"wall_thickness", 0.05},
+                          {"bottom_thickness", bottom}, {"hole_radius", radius}}};
+        doc["liquids"].push_back({{"type", "box"}, {"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}}});
+        doc["gravity"] = {0, 0, -g};
+        doc["frames"] = 2;  // the viscous time ρ r²/η is 1 ms: two frames are steady
+        sim::Simulation s(parseScene(doc, "orifice"));
+        for (int f = 0; f < 2; ++f) s.advanceFrame();
+        const sim::Field& w = s.fields().velocity[2];
+        const sim::Field& open = s.fractions().faceOpenArea[2];
+        double q = 0;  // through the row of z-faces on the seam, below the bottom
+        for (int j = 0; j < w.lattice.size[1]; ++j)
+            for (int i = 0; i < w.lattice.size[0]; ++i)
+                q -= w[w.lattice.index(i, j, 0)] * open[open.lattice.index(i, j, 0)] * dx * dx;
+        return q;
+    };
+    const double dagan = rho * g * length / (eta * (3 / std::pow(radius, 3) + 8 * bottom / (M_PI * std::pow(radius, 4))));
+    for (const double sideways : {0.5, 0.0}) {  // the hole's axis on a column of z-faces, then between them
+        const double above = flux(sideways, 1e-3), below = flux(sideways, -1e-3);
+        std::printf("orifice, axis %.1f cell off the faces' corners: flux %.4g m³/s with the bottom a thousandth "
+                    "of a cell above a row of faces, %.4g below (%+.2f %%); Dagan %.4g (grid/Dagan %.2f)\n",
+                    sideways, above, below, 100 * (above / below - 1), dagan, below / dagan);
+        EXPECT_NEAR(above / below, 1.0, sideways == 0.5 ? 0.01 : 0.1);
+    }
+}
+
 // 2b. A shear wave u_x = A sin(kz) in liquid filling a box periodic on every axis decays at the
 // viscous rate νk², and the particles' affine velocities carry it across the seams: a transfer
 // that took a wrapped grid sample's offset at face value put it a period L away, an error of
