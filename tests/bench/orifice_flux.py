@@ -1,0 +1,94 @@
+#!/usr/bin/python3
+r"""Steady Stokes flux through the sample cup's hole against grid size and where the hole sits.
+
+The sample cup's bottom (hole radius 9 mm, 5 mm thick) spans a box 120 mm wide that is periodic along
+z and full of liquid, and gravity drives the liquid through the hole. That isolates the hole from the
+cup's free surfaces, so its flux can be compared across grids, placements and with Dagan, Weinbaum &
+Pfeffer's (1982) orifice flux Q = ρ g L / (η (3/r³ + 8t/(π r⁴))), within about 1 % of the exact Stokes
+flow in a wide box. The flux is the particles' mean vertical velocity times the liquid volume over the
+period L. A placement "s:u" moves the cup s cells along x and y and u cells up, from the bottom's
+underside on a row of z-faces; the sample cup at 48³ sits as "0:0.667" here at resolution 32 (the
+same Δx), and at 96³ as "0:0.333" at resolution 64.
+
+    /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32 --placements 0:0.667,0.25:0.667,0.5:0.667
+    /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32,64 --placements 0:0.25,0.5:0.25
+"""
+import argparse
+import json
+import math
+import pathlib
+import statistics
+import subprocess
+import sys
+import tempfile
+
+from viscosity_floor import read_particles  # the "VSCP" reader, beside this script
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+WIDTH, PERIOD, BOTTOM_Z = 0.12, 0.06, 0.03  # m
+HOLE, THICKNESS = 0.009, 0.005              # the sample cup's, m
+
+
+def scene(resolution, sideways, up, viscosity, density, frames, seed):
+    dx = WIDTH / resolution
+    return {"format": "viscoscope.scene", "version": 1,
+            "domain": {"min": [-WIDTH / 2, -WIDTH / 2, 0], "max": [WIDTH / 2, WIDTH / 2, PERIOD],
+                       "resolution": resolution, "periodic": [False, False, True]},
+            # Walls thicker than the box's half-diagonal: below the bottom the liquid fills the box.
+            "solids": [{"type": "cup", "position": [sideways * dx, sideways * dx, BOTTOM_Z + up * dx],
+                        "inner_radius": 0.043, "height": 3.0, "wall_thickness": 0.05,
+                        "bottom_thickness": THICKNESS, "hole_radius": HOLE}],
+            "liquids": [{"type": "box", "min": [-WIDTH / 2, -WIDTH / 2, 0], "max": [WIDTH / 2, WIDTH / 2, PERIOD]}],
+            "material": {"density": density, "viscosity": viscosity, "surface_tension": 0.0},
+            "gravity": [0, 0, -9.81], "fps": 30, "frames": frames, "seed": seed,
+            "output": {"particles": True, "vdb": False, "mesh": False}}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--engine", default=ROOT / "build/bin/viscoscope", type=pathlib.Path)
+    parser.add_argument("--resolutions", default="32,64", help="cells across the 120 mm box")
+    parser.add_argument("--placements", default="0:0.667,0.25:0.667,0.5:0.667",
+                        help="comma-separated s:u, the cup moved s cells along x and y and u cells up")
+    parser.add_argument("--viscosity", type=float, default=100.0)
+    parser.add_argument("--density", type=float, default=1400.0)
+    parser.add_argument("--frames", type=int, default=3, help="frames simulated; the last one is read")
+    parser.add_argument("--seed", type=int, default=3)
+    args = parser.parse_args()
+    try:
+        placements = [tuple(float(v) for v in p.split(":")) for p in args.placements.split(",")]
+        resolutions = [int(r) for r in args.resolutions.split(",")]
+    except ValueError as error:
+        sys.exit(f"orifice_flux: --placements takes s:u pairs and --resolutions integers ({error})")
+    if any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in placements):
+        sys.exit("orifice_flux: every placement must be two finite numbers s:u")
+    if not (args.viscosity > 0 and args.density > 0 and args.frames > 0):
+        sys.exit("orifice_flux: --viscosity, --density and --frames must be positive")
+
+    dagan = args.density * 9.81 * PERIOD / (
+        args.viscosity * (3 / HOLE ** 3 + 8 * THICKNESS / (math.pi * HOLE ** 4)))
+    print(f"eta {args.viscosity} Pa·s, frame {args.frames}; Dagan's flux {dagan:.4g} m³/s")
+    with tempfile.TemporaryDirectory(prefix="orifice_flux_") as tmp:
+        for resolution in resolutions:
+            fluxes = []
+            for sideways, up in placements:
+                work = pathlib.Path(tmp) / f"{resolution}_{sideways}_{up}"
+                work.mkdir()
+                (work / "scene.json").write_text(json.dumps(scene(
+                    resolution, sideways, up, args.viscosity, args.density, args.frames, args.seed)), encoding="utf-8")
+                result = subprocess.run([str(args.engine), "simulate", str(work / "scene.json"), "--out",
+                                         str(work / "out"), "--progress", "none"], capture_output=True, text=True)
+                if result.returncode != 0:
+                    sys.exit(f"simulate failed at {resolution}, placement {sideways}:{up}: {result.stderr.strip()}")
+                volume = json.loads((work / "out/simulation.json").read_text())["frames"][-1]["volume"]
+                w = read_particles(work / "out" / f"particles_{args.frames:05d}.bin")[:, 5]
+                flux = -float(w.mean()) * volume / PERIOD
+                fluxes.append(flux)
+                print(f"  resolution {resolution} (hole {HOLE * resolution / WIDTH:.2f} cells), sideways {sideways:.3f}, "
+                      f"up {up:.3f}: flux {flux:.4g} m³/s, {flux / dagan:.3f} × Dagan", flush=True)
+            print(f"resolution {resolution}: median {statistics.median(fluxes) / dagan:.3f} × Dagan, "
+                  f"spread {max(fluxes) / min(fluxes) - 1:+.1%}")
+
+
+if __name__ == "__main__":
+    main()
