@@ -302,7 +302,7 @@ TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
                           {"bottom_thickness", bottom}, {"hole_radius", radius}}};
         doc["liquids"].push_back({{"type", "box"}, {"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}}});
         doc["gravity"] = {0, 0, -g};
-        doc["frames"] = 2;  // the viscous time ρ r²/η is 1 ms: two frames are steady
+        doc["frames"] = 2;  // 67 ms, twice the box's viscous time ρ L²/η; both runs are read alike
         sim::Simulation s(parseScene(doc, "orifice"));
         for (int f = 0; f < 2; ++f) s.advanceFrame();
         const sim::Field& w = s.fields().velocity[2];
@@ -323,7 +323,7 @@ TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
     }
 }
 
-// 2b. A shear wave u_x = A sin(kz) in liquid filling a box periodic on every axis decays at the
+// 2c. A shear wave u_x = A sin(kz) in liquid filling a box periodic on every axis decays at the
 // viscous rate νk², and the particles' affine velocities carry it across the seams: a transfer
 // that took a wrapped grid sample's offset at face value put it a period L away, an error of
 // C·L = 2πA on the seam's faces (a liquid slug falling through a periodic pipe blew up from it).

@@ -59,6 +59,9 @@ double secondsSince(Clock::time_point t0) {
 // half-cell whose centre is at distance phi from a planar interface.
 double insideFraction(double phi, double h) { return std::clamp(0.5 - phi / h, 0.0, 1.0); }
 
+// Index of half-cell (i, j, k) among `fine` half-cells, x fastest.
+size_t halfCellIndex(const Vec3i& fine, int i, int j, int k) { return i + fine[0] * (j + size_t(fine[1]) * k); }
+
 // The non-solid share of a sample of size h (a half-cell, or a patch of a face) centred at x.
 double nonSolidFraction(const SolidField& solids, const Vec3& x, double h) {
     return 1.0 - insideFraction(solids.distance(x), h);
@@ -162,7 +165,7 @@ Simulation::Simulation(const Scene& scene)
         for (int j = 0; j < fine[1]; ++j)
             for (int i = 0; i < fine[0]; ++i) {
                 const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
-                fineSolidFraction_[i + fine[0] * (j + size_t(fine[1]) * k)] = nonSolidFraction(*solids_, x, h);
+                fineSolidFraction_[halfCellIndex(fine, i, j, k)] = nonSolidFraction(*solids_, x, h);
             }
     });
     computeFaceOpenings();
@@ -204,7 +207,7 @@ void Simulation::computeFaceOpenings() {
         for (int k = 0; k < 2; ++k)
             for (int j = 0; j < 2; ++j)
                 for (int i = 0; i < 2; ++i)
-                    open += fineSolidFraction_[(corner[0] + i) + fine[0] * ((corner[1] + j) + size_t(fine[1]) * (corner[2] + k))];
+                    open += fineSolidFraction_[halfCellIndex(fine, corner[0] + i, corner[1] + j, corner[2] + k)];
         cellAllSolid[c] = open / 8 < kMinWeight;
     });
     for (int a = 0; a < 3; ++a) {
@@ -500,7 +503,7 @@ void Simulation::computeFractions() {
                 for (int k = 2 * ck; k < 2 * ck + 2; ++k)
                     for (int j = 2 * cj; j < 2 * cj + 2; ++j)
                         for (int i = 2 * ci; i < 2 * ci + 2; ++i) {
-                            const size_t idx = i + fine[0] * (j + size_t(fine[1]) * k);
+                            const size_t idx = halfCellIndex(fine, i, j, k);
                             if (fineSolidFraction_[idx] == 0) continue;
                             const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
                             fineFraction[idx] = fineSolidFraction_[idx] *
@@ -528,7 +531,7 @@ void Simulation::computeFractions() {
                             if (grid_.periodic[a]) f[a] = (f[a] % fine[a] + fine[a]) % fine[a];
                             else inside = inside && f[a] >= 0 && f[a] < fine[a];
                         }
-                        if (inside) sum += fineFraction[f[0] + fine[0] * (f[1] + size_t(fine[1]) * f[2])];
+                        if (inside) sum += fineFraction[halfCellIndex(fine, f[0], f[1], f[2])];
                     }
             out[idx] = sum / 8;
         });
