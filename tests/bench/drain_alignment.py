@@ -15,11 +15,9 @@ import argparse
 import json
 import pathlib
 import statistics
-import subprocess
-import sys
 import tempfile
 
-from viscosity_floor import read_particles  # the "VSCP" reader, beside this script
+from viscosity_floor import read_particles, simulate  # beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
@@ -63,17 +61,12 @@ def main():
                              output={"particles": True, "vdb": False, "mesh": False})
                 scene["domain"]["resolution"] = resolution
                 scene["material"]["viscosity"] = args.viscosity
-                work = pathlib.Path(tmp) / f"{resolution}_{shift}"
-                work.mkdir()
-                (work / "scene.json").write_text(json.dumps(scene), encoding="utf-8")
-                result = subprocess.run([str(args.engine), "simulate", str(work / "scene.json"), "--out",
-                                         str(work / "out"), "--progress", "none"], capture_output=True, text=True)
-                if result.returncode != 0:
-                    sys.exit(f"simulate failed at {resolution}³, shift {shift}: {result.stderr.strip()}")
+                out = simulate(args.engine, scene, pathlib.Path(tmp) / f"{resolution}_{shift}",
+                               f"{resolution}³, shift {shift}")
                 bottom = moved["position"][2]
                 row = []
                 for f in frames:
-                    share = drained_share(work / "out" / f"particles_{f:05d}.bin", bottom)
+                    share = drained_share(out / f"particles_{f:05d}.bin", bottom)
                     shares[f].append(share)
                     row.append(f"{share:.4f}")
                 print(f"  {resolution}³ shift {shift:4.2f}: " + " ".join(row), flush=True)

@@ -18,11 +18,10 @@ import json
 import math
 import pathlib
 import statistics
-import subprocess
 import sys
 import tempfile
 
-from viscosity_floor import read_particles  # the "VSCP" reader, beside this script
+from viscosity_floor import read_particles, simulate  # beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 WIDTH, PERIOD, BOTTOM_Z = 0.12, 0.06, 0.03  # m
@@ -72,16 +71,12 @@ def main():
         for resolution in resolutions:
             fluxes = []
             for sideways, up in placements:
-                work = pathlib.Path(tmp) / f"{resolution}_{sideways}_{up}"
-                work.mkdir()
-                (work / "scene.json").write_text(json.dumps(scene(
-                    resolution, sideways, up, args.viscosity, args.density, args.frames, args.seed)), encoding="utf-8")
-                result = subprocess.run([str(args.engine), "simulate", str(work / "scene.json"), "--out",
-                                         str(work / "out"), "--progress", "none"], capture_output=True, text=True)
-                if result.returncode != 0:
-                    sys.exit(f"simulate failed at {resolution}, placement {sideways}:{up}: {result.stderr.strip()}")
-                volume = json.loads((work / "out/simulation.json").read_text())["frames"][-1]["volume"]
-                w = read_particles(work / "out" / f"particles_{args.frames:05d}.bin")[:, 5]
+                out = simulate(args.engine,
+                               scene(resolution, sideways, up, args.viscosity, args.density, args.frames, args.seed),
+                               pathlib.Path(tmp) / f"{resolution}_{sideways}_{up}",
+                               f"{resolution}, placement {sideways}:{up}")
+                volume = json.loads((out / "simulation.json").read_text())["frames"][-1]["volume"]
+                w = read_particles(out / f"particles_{args.frames:05d}.bin")[:, 5]
                 flux = -float(w.mean()) * volume / PERIOD
                 fluxes.append(flux)
                 print(f"  resolution {resolution} (hole {HOLE * resolution / WIDTH:.2f} cells), sideways {sideways:.3f}, "

@@ -13,6 +13,7 @@ import json
 import pathlib
 import struct
 import subprocess
+import sys
 import tempfile
 
 import numpy as np
@@ -25,6 +26,18 @@ def read_particles(path):
     assert data[:4] == b"VSCP", path
     (count,) = struct.unpack_from("<Q", data, 8)
     return np.frombuffer(data, dtype="<f4", count=6 * count, offset=16).reshape(count, 6)
+
+
+def simulate(engine, scene, work, what):
+    """Writes `scene` to work/scene.json and simulates it into work/out; on failure exits with one
+    line naming `what` ran."""
+    work.mkdir()
+    (work / "scene.json").write_text(json.dumps(scene), encoding="utf-8")
+    result = subprocess.run([str(engine), "simulate", str(work / "scene.json"), "--out", str(work / "out"),
+                             "--progress", "none"], capture_output=True, text=True)
+    if result.returncode != 0:
+        sys.exit(f"simulate failed at {what}: {result.stderr.strip()}")
+    return work / "out"
 
 
 def drained_fraction(engine, scene, resolution, eta, frames, seed):
