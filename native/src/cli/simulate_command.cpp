@@ -58,6 +58,14 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     const auto start = std::chrono::steady_clock::now();
     sim::Simulation simulation(scene);
     const double initialVolume = simulation.liquidVolume();
+    nlohmann::json holes = nlohmann::json::array();
+    for (const sim::HoleCalibration& hole : simulation.holeCalibrations()) {
+        holes.push_back({{"solid", hole.solid}, {"factor", hole.factor}, {"grid_flux_vs_dagan", hole.gridFlux},
+                         {"calibrated_flux_vs_dagan", hole.calibratedFlux}, {"solves", hole.solves}});
+        progress.report({{"event", "hole_calibration"}, {"stage", "simulate"}, {"solid", hole.solid},
+                         {"factor", hole.factor}, {"grid_flux_vs_dagan", hole.gridFlux},
+                         {"calibrated_flux_vs_dagan", hole.calibratedFlux}});
+    }
     writeFrame(simulation, dir);
 
     nlohmann::json frames = nlohmann::json::array();
@@ -86,6 +94,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     const nlohmann::json summary = {{"format", "viscoscope.simulation"}, {"version", 1},
                                     {"scene", sceneToJson(scene)}, {"frames", frames},
                                     {"initial_volume", initialVolume}, {"volume_drift", drift},
+                                    {"hole_calibrations", holes},
                                     {"wall_seconds", elapsed}};
     std::ofstream(dir / "simulation.json.tmp") << summary.dump(1);
     std::filesystem::rename(dir / "simulation.json.tmp", dir / "simulation.json");

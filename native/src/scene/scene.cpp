@@ -304,6 +304,12 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
         scene.solver.cfl = s.positive("cfl", scene.solver.cfl);
         scene.solver.particlesPerCell = s.integer("particles_per_cell", 1, 64, scene.solver.particlesPerCell);
         scene.solver.picardIterations = s.integer("picard_iterations", 1, 50, scene.solver.picardIterations);
+        if (s.has("hole_conductance")) {
+            const std::string model = s.string("hole_conductance");
+            if (model == "dagan") scene.solver.holeConductance = HoleConductance::Dagan;
+            else if (model == "grid") scene.solver.holeConductance = HoleConductance::Grid;
+            else s.fail("hole_conductance", "must be \"dagan\" or \"grid\", got '" + model + "'");
+        }
     }
     if (root.has("output")) {
         const FieldReader o = root.child("output");
@@ -403,7 +409,8 @@ json sceneToJson(const Scene& s) {
           {"max_iterations", s.solver.maxIterations},
           {"cfl", s.solver.cfl},
           {"particles_per_cell", s.solver.particlesPerCell},
-          {"picard_iterations", s.solver.picardIterations}}},
+          {"picard_iterations", s.solver.picardIterations},
+          {"hole_conductance", s.solver.holeConductance == HoleConductance::Dagan ? "dagan" : "grid"}}},
         {"output",
          {{"particles", s.outputs.particles}, {"vdb", s.outputs.vdb}, {"mesh", s.outputs.mesh}}},
     };

@@ -169,6 +169,14 @@ Simulation::Simulation(const Scene& scene)
             }
     });
     computeFaceOpenings();
+    if (scene.solver.holeConductance == HoleConductance::Dagan)
+        for (size_t i = 0; i < scene.solids.size(); ++i)
+            if (const auto* cup = std::get_if<CupSolid>(&scene.solids[i]); cup && cup->holeRadius > 0) {
+                HoleCalibration calibration = calibrateHole(*cup, grid_, scene.solver);
+                calibration.solid = static_cast<int>(i);
+                scaleHoleFaces(*cup, calibration.factor);
+                holeCalibrations_.push_back(calibration);
+            }
 
     seedParticles();
     if (particles_.position.empty() &&
