@@ -8,7 +8,9 @@ Pfeffer's (1982) orifice flux Q = ρ g L / (η (3/r³ + 8t/(π r⁴))), within a
 flow in a wide box. The flux is the particles' mean vertical velocity times the liquid volume over the
 period L. A placement "s:u" moves the cup s cells along x and y and u cells up, from the bottom's
 underside on a row of z-faces; the sample cup at 48³ sits as "0:0.667" here at resolution 32 (the
-same Δx), and at 96³ as "0:0.333" at resolution 64.
+same Δx), and at 96³ as "0:0.333" at resolution 64. Each placement runs with every hole conductance
+of --conductances: "grid" (the faces as they are) and "dagan" (the faces' open area calibrated, see
+HoleCalibration in native/src/sim/sim.h; the default).
 
     /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32 --placements 0:0.667,0.25:0.667,0.5:0.667
     /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32,64 --placements 0:0.25,0.5:0.25
@@ -28,7 +30,7 @@ WIDTH, PERIOD, BOTTOM_Z = 0.12, 0.06, 0.03  # m
 HOLE, THICKNESS = 0.009, 0.005              # the sample cup's, m
 
 
-def scene(resolution, sideways, up, viscosity, density, frames, seed):
+def scene(resolution, sideways, up, conductance, viscosity, density, frames, seed):
     dx = WIDTH / resolution
     return {"format": "viscoscope.scene", "version": 1,
             "domain": {"min": [-WIDTH / 2, -WIDTH / 2, 0], "max": [WIDTH / 2, WIDTH / 2, PERIOD],
@@ -40,6 +42,7 @@ def scene(resolution, sideways, up, viscosity, density, frames, seed):
             "liquids": [{"type": "box", "min": [-WIDTH / 2, -WIDTH / 2, 0], "max": [WIDTH / 2, WIDTH / 2, PERIOD]}],
             "material": {"density": density, "viscosity": viscosity, "surface_tension": 0.0},
             "gravity": [0, 0, -9.81], "fps": 30, "frames": frames, "seed": seed,
+            "solver": {"hole_conductance": conductance},
             "output": {"particles": True, "vdb": False, "mesh": False}}
 
 
@@ -49,6 +52,7 @@ def main():
     parser.add_argument("--resolutions", default="32,64", help="cells across the 120 mm box")
     parser.add_argument("--placements", default="0:0.667,0.25:0.667,0.5:0.667",
                         help="comma-separated s:u, the cup moved s cells along x and y and u cells up")
+    parser.add_argument("--conductances", default="grid,dagan", help="comma-separated: grid, dagan")
     parser.add_argument("--viscosity", type=float, default=100.0)
     parser.add_argument("--density", type=float, default=1400.0)
     parser.add_argument("--frames", type=int, default=3, help="frames simulated; the last one is read")
@@ -59,6 +63,9 @@ def main():
         resolutions = [int(r) for r in args.resolutions.split(",")]
     except ValueError as error:
         sys.exit(f"orifice_flux: --placements takes s:u pairs and --resolutions integers ({error})")
+    conductances = args.conductances.split(",")
+    if not set(conductances) <= {"grid", "dagan"}:
+        sys.exit(f"orifice_flux: --conductances takes grid and/or dagan, got {args.conductances}")
     if any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in placements):
         sys.exit("orifice_flux: every placement must be two finite numbers s:u")
     if not (args.viscosity > 0 and args.density > 0 and args.frames > 0):
@@ -69,20 +76,25 @@ def main():
     print(f"eta {args.viscosity} Pa·s, frame {args.frames}; Dagan's flux {dagan:.4g} m³/s")
     with tempfile.TemporaryDirectory(prefix="orifice_flux_") as tmp:
         for resolution in resolutions:
-            fluxes = []
-            for sideways, up in placements:
-                out = simulate(args.engine,
-                               scene(resolution, sideways, up, args.viscosity, args.density, args.frames, args.seed),
-                               pathlib.Path(tmp) / f"{resolution}_{sideways}_{up}",
-                               f"{resolution}, placement {sideways}:{up}")
-                volume = json.loads((out / "simulation.json").read_text())["frames"][-1]["volume"]
-                w = read_particles(out / f"particles_{args.frames:05d}.bin")[:, 5]
-                flux = -float(w.mean()) * volume / PERIOD
-                fluxes.append(flux)
-                print(f"  resolution {resolution} (hole {HOLE * resolution / WIDTH:.2f} cells), sideways {sideways:.3f}, "
-                      f"up {up:.3f}: flux {flux:.4g} m³/s, {flux / dagan:.3f} × Dagan", flush=True)
-            print(f"resolution {resolution}: median {statistics.median(fluxes) / dagan:.3f} × Dagan, "
-                  f"spread {max(fluxes) / min(fluxes) - 1:+.1%}")
+            for conductance in conductances:
+                fluxes = []
+                for sideways, up in placements:
+                    out = simulate(args.engine,
+                                   scene(resolution, sideways, up, conductance, args.viscosity, args.density,
+                                         args.frames, args.seed),
+                                   pathlib.Path(tmp) / f"{resolution}_{conductance}_{sideways}_{up}",
+                                   f"{resolution}, {conductance}, placement {sideways}:{up}")
+                    summary = json.loads((out / "simulation.json").read_text())
+                    volume = summary["frames"][-1]["volume"]
+                    w = read_particles(out / f"particles_{args.frames:05d}.bin")[:, 5]
+                    flux = -float(w.mean()) * volume / PERIOD
+                    fluxes.append(flux)
+                    factors = "".join(f", factor {h['factor']:.3f}" for h in summary["hole_calibrations"])
+                    print(f"  resolution {resolution} (hole {HOLE * resolution / WIDTH:.2f} cells), {conductance}, "
+                          f"sideways {sideways:.3f}, up {up:.3f}: flux {flux:.4g} m³/s, {flux / dagan:.3f} × Dagan"
+                          f"{factors}", flush=True)
+                print(f"resolution {resolution}, {conductance}: median {statistics.median(fluxes) / dagan:.3f} × Dagan, "
+                      f"spread {max(fluxes) / min(fluxes) - 1:+.1%}")
 
 
 if __name__ == "__main__":
