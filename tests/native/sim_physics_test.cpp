@@ -341,10 +341,10 @@ TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
 // 2c. With the hole's conductance calibrated (the default; see HoleCalibration), the same box's
 // steady flux hardly depends on where the hole sits and matches Dagan's. The calibration solves
 // another box, a plate periodic along every axis, so this checks that its factor carries over to
-// the cup in a box with walls and a period 1.6× as long. Measured: 1.006, 1.008 and 1.015 × Dagan
-// (spread 0.94 %), the faces alone 1.242, 1.486 and 1.271. Stepped over frames instead, the flux
-// of both creeps up in this closed box: calibrated 0.98–1.00 after one frame, 1.03–1.07 after two,
-// 1.07–1.11 after four, with a spread of 2.6–4.1 %.
+// the cup in a box with walls, 1.6× as wide and with a period 0.76× as long. Measured: 1.006,
+// 1.008 and 1.015 × Dagan (spread 0.94 %), the faces alone 1.242, 1.486 and 1.271. Stepped over
+// frames instead, the flux of both creeps up in this closed box: calibrated 0.98–1.00 after one
+// frame, 1.03–1.07 after two, 1.07–1.11 after four, with a spread of 2.6–4.1 %.
 TEST(Physics, CalibratedHoleFluxMatchesDaganWhereverItSits) {
     std::vector<double> fluxes;
     for (const auto& [sideways, lift] : std::vector<std::pair<double, double>>{{0, 0.667}, {0.5, 0.667}, {0.25, 0.25}}) {
