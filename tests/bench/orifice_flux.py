@@ -89,10 +89,10 @@ def main():
                     w = read_particles(out / f"particles_{args.frames:05d}.bin")[:, 5]
                     flux = -float(w.mean()) * volume / PERIOD
                     fluxes.append(flux)
-                    factors = "".join(f", factor {h['factor']:.3f}" for h in summary["hole_calibrations"])
+                    resistances = "".join(f", resistance {h['resistance']:.3f}" for h in summary["hole_calibrations"])
                     print(f"  resolution {resolution} (hole {HOLE * resolution / WIDTH:.2f} cells), {conductance}, "
                           f"sideways {sideways:.3f}, up {up:.3f}: flux {flux:.4g} m³/s, {flux / dagan:.3f} × Dagan"
-                          f"{factors}", flush=True)
+                          f"{resistances}", flush=True)
                 print(f"resolution {resolution}, {conductance}: median {statistics.median(fluxes) / dagan:.3f} × Dagan, "
                       f"spread {max(fluxes) / min(fluxes) - 1:+.1%}")
 

@@ -324,7 +324,7 @@ TEST(Physics, PipeFullOfLiquidCarriesPoiseuilleFlux) {
 // above or below a row of z-faces (the faces as they are, without the hole's calibration). A face a
 // hair outside the solid beside a cell with no non-solid volume used to stay open, and the solve
 // took that cell for air: the flux read 25–28× higher a thousandth of a cell above the row than
-// below it. Measured now: −0.05 % with the hole's axis on a column of z-faces, and +6 % with it
+// below it. Measured now: −0.09 % with the hole's axis on a column of z-faces, and +6 % with it
 // between columns, where the faces under the hole's rim are open above the row (partly, to the
 // hole) and shut below it. Against Dagan's flux the faces alone carry 1.3–1.6×, by where the hole sits.
 TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
@@ -340,9 +340,10 @@ TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
 
 // 2c. With the hole's conductance calibrated (the default; see HoleCalibration), the same box's
 // steady flux hardly depends on where the hole sits and matches Dagan's. The calibration solves
-// another box, a plate periodic along every axis, so this checks that its factor carries over to
-// the cup in a box with walls, 1.6× as wide and with a period 0.76× as long. Measured: 1.006,
-// 1.008 and 1.015 × Dagan (spread 0.94 %), the faces alone 1.242, 1.486 and 1.271. Stepped over
+// another box, a plate periodic along every axis, so this checks that its resistance carries over
+// to the cup in a box with walls, 1.6× as wide and with a period 0.76× as long. Measured: 1.005,
+// 0.999 and 1.006 × Dagan (spread 0.72 %), the faces alone 1.235, 1.487 and 1.271. When the
+// calibration scaled the faces' open area instead, 1.006, 1.008 and 1.015. Stepped over
 // frames instead, the flux of both creeps up in this closed box: calibrated 0.98–1.00 after one
 // frame, 1.03–1.07 after two, 1.07–1.11 after four, with a spread of 2.6–4.1 %.
 TEST(Physics, CalibratedHoleFluxMatchesDaganWhereverItSits) {
@@ -352,8 +353,8 @@ TEST(Physics, CalibratedHoleFluxMatchesDaganWhereverItSits) {
         const double grid = orificeFluxOverDagan(sideways, lift, "grid", true);
         const double calibrated = orificeFluxOverDagan(sideways, lift, "dagan", true, &calibration);
         std::printf("orifice, cup %.2f cell sideways and %.3f up: faces alone %.3f × Dagan, calibrated %.3f "
-                    "(factor %.3f; in the calibration's own box %.3f before, %.3f after)\n",
-                    sideways, lift, grid, calibrated, calibration.factor, calibration.gridFlux, calibration.calibratedFlux);
+                    "(resistance %.3f; in the calibration's own box %.3f before, %.3f after)\n",
+                    sideways, lift, grid, calibrated, calibration.resistance, calibration.gridFlux, calibration.calibratedFlux);
         EXPECT_NEAR(calibration.calibratedFlux, 1.0, 0.01);
         fluxes.push_back(calibrated);
     }

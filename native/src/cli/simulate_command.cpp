@@ -60,10 +60,10 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     const double initialVolume = simulation.liquidVolume();
     nlohmann::json holes = nlohmann::json::array();
     for (const sim::HoleCalibration& hole : simulation.holeCalibrations()) {
-        holes.push_back({{"solid", hole.solid}, {"factor", hole.factor}, {"grid_flux_vs_dagan", hole.gridFlux},
+        holes.push_back({{"solid", hole.solid}, {"resistance", hole.resistance}, {"grid_flux_vs_dagan", hole.gridFlux},
                          {"calibrated_flux_vs_dagan", hole.calibratedFlux}, {"solves", hole.solves}});
         progress.report({{"event", "hole_calibration"}, {"stage", "simulate"}, {"solid", hole.solid},
-                         {"factor", hole.factor}, {"grid_flux_vs_dagan", hole.gridFlux},
+                         {"resistance", hole.resistance}, {"grid_flux_vs_dagan", hole.gridFlux},
                          {"calibrated_flux_vs_dagan", hole.calibratedFlux}});
     }
     writeFrame(simulation, dir);

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <utility>
 #include <vector>
 
 namespace viscoscope::sim {
@@ -53,6 +54,13 @@ struct Lattice {
         return resolve(n) ? index(n[0], n[1], n[2]) : -1;
     }
 };
+
+// The cells on either side of the face at `face` (lattice coordinates) on `axis`, −1 outside the
+// domain: the face sits on the low side of the cell with its coordinates.
+inline std::pair<int, int> faceCells(const Lattice& cells, const Vec3i& face, int axis) {
+    Vec3i high = face;
+    return {cells.neighbour(face, axis, -1), cells.resolve(high) ? cells.index(high[0], high[1], high[2]) : -1};
+}
 
 struct Grid {
     Vec3 origin{0, 0, 0};

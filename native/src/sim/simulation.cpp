@@ -99,13 +99,6 @@ void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, in
             for (int i = from[0]; i <= to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
 }
 
-// The cells on either side of the face at `face` (lattice coordinates) on `axis`, −1 outside the
-// domain: the face sits on the low side of the cell with its coordinates.
-std::pair<int, int> faceCells(const Lattice& cells, const Vec3i& face, int axis) {
-    Vec3i high = face;
-    return {cells.neighbour(face, axis, -1), cells.resolve(high) ? cells.index(high[0], high[1], high[2]) : -1};
-}
-
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
     if (const auto* box = std::get_if<LiquidBox>(&source))
         return (x.array() >= box->min.array()).all() && (x.array() <= box->max.array()).all();
@@ -174,7 +167,7 @@ Simulation::Simulation(const Scene& scene)
             if (const auto* cup = std::get_if<CupSolid>(&scene.solids[i]); cup && cup->holeRadius > 0) {
                 HoleCalibration calibration = calibrateHole(*cup, grid_, scene.solver);
                 calibration.solid = static_cast<int>(i);
-                scaleHoleFaces(*cup, calibration.factor);
+                setHoleResistance(*cup, calibration.resistance);
                 holeCalibrations_.push_back(calibration);
             }
 

@@ -127,10 +127,21 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
 struct FaceUnknowns {
     std::array<std::vector<int>, 3> dofOfFace;
     std::vector<std::pair<int, int>> faceOfDof;
-    Vec inverseMass;
+    Vec mass;         // ρ W_u
+    Vec inverseMass;  // of M + Δt B when the drag is included, else of M
 };
 
-FaceUnknowns faceUnknowns(const StokesProblem& p, const std::vector<Row>& rows) {
+// The drag β (kg/(m³ s)) on face f along `axis`.
+double faceDrag(const StokesProblem& p, int axis, int f) {
+    const Field& resistance = p.weights->faceResistance[axis];
+    if (resistance.values.empty() || resistance[f] == 0) return 0;
+    const Field& eta = *p.cellViscosity;
+    const auto [lo, hi] = faceCells(eta.lattice, resistance.lattice.coords(f), axis);
+    const double viscosity = lo >= 0 && hi >= 0 ? 0.5 * (eta[lo] + eta[hi]) : eta[lo >= 0 ? lo : hi];
+    return viscosity * resistance[f];
+}
+
+FaceUnknowns faceUnknowns(const StokesProblem& p, const std::vector<Row>& rows, bool withDrag) {
     FaceUnknowns u;
     for (int a = 0; a < 3; ++a) u.dofOfFace[a].assign(p.weights->face[a].values.size(), -1);
     for (const Row& row : rows)
@@ -139,10 +150,12 @@ FaceUnknowns faceUnknowns(const StokesProblem& p, const std::vector<Row>& rows) 
                 u.dofOfFace[t.axis][t.face] = static_cast<int>(u.faceOfDof.size());
                 u.faceOfDof.emplace_back(t.axis, t.face);
             }
+    u.mass.resize(u.faceOfDof.size());
     u.inverseMass.resize(u.faceOfDof.size());
     for (size_t d = 0; d < u.faceOfDof.size(); ++d) {
         const auto [a, f] = u.faceOfDof[d];
-        u.inverseMass[d] = 1.0 / (p.density * std::max(p.weights->face[a][f], kMinMassFraction));
+        u.mass[d] = p.density * std::max(p.weights->face[a][f], kMinMassFraction);
+        u.inverseMass[d] = 1.0 / (u.mass[d] + (withDrag ? p.dt * faceDrag(p, a, f) : 0.0));
     }
     return u;
 }
@@ -278,10 +291,11 @@ Field& unknownField(StokesState& s, const Row& row) {
     return s.shearStress[row.component];
 }
 
-// Eliminated-velocity system [Δt H M⁻¹ Hᵀ + diag(compliance)] x = H u*, then u = u* − Δt M⁻¹ Hᵀ x.
-// With pressure rows only, this is the classic variational pressure projection.
+// Eliminated-velocity system [Δt H M̃⁻¹ Hᵀ + diag(compliance)] x = H ũ, then u = ũ − Δt M̃⁻¹ Hᵀ x,
+// with M̃ = M + Δt B and ũ = M̃⁻¹ M u*: the drag slows the faces it acts on implicitly, and the system
+// stays SPD. With pressure rows only, this is the classic variational pressure projection.
 CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vector<Row>& rows) {
-    const FaceUnknowns u = faceUnknowns(p, rows);
+    const FaceUnknowns u = faceUnknowns(p, rows, true);
     const SparseRows h = assemble(rows, u);
     const SparseRows ht = h.transpose();
     Vec compliance(rows.size()), x(rows.size());
@@ -289,7 +303,7 @@ CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vect
         compliance[r] = rows[r].compliance;
         x[r] = unknownField(s, rows[r])[rows[r].sample];  // warm start from the previous step
     }
-    const Vec uStar = gatherVelocity(s, u);
+    const Vec uStar = gatherVelocity(s, u).cwiseProduct(u.mass).cwiseProduct(u.inverseMass);
     Vec b;
     multiply(h, uStar, b);
     // Pressure rows are −W_p ∇·u; aiming at ∇·u = d moves W_p d to the right-hand side.
@@ -321,12 +335,12 @@ CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vect
 
 // Implicit viscosity alone, in velocity unknowns: [M + Δt H_τᵀ diag(1/compliance) H_τ] u = M u*.
 CgResult solveViscosity(const StokesProblem& p, StokesState& s, const std::vector<Row>& rows) {
-    const FaceUnknowns u = faceUnknowns(p, rows);
+    const FaceUnknowns u = faceUnknowns(p, rows, false);
     const SparseRows h = assemble(rows, u);
     const SparseRows ht = h.transpose();
     Vec stiffness(rows.size());
     for (size_t r = 0; r < rows.size(); ++r) stiffness[r] = p.dt / rows[r].compliance;
-    const Vec mass = u.inverseMass.cwiseInverse();
+    const Vec& mass = u.mass;
     Vec x = gatherVelocity(s, u);
     const Vec b = mass.cwiseProduct(x);
 

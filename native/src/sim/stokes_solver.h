@@ -4,8 +4,10 @@
 // - DecoupledViscositySolver: Batty & Bridson 2008 variational viscosity, then a separate pressure
 //   projection. Kept as the baseline the unified scheme is compared against.
 //
-// Discretization (both schemes): minimize ½|u − u*|²_M + Δt Σ η |D u|²_W subject to W_p ∇·(A u) = 0,
-// where M = ρ W_u and A holds the faces' open (non-solid) area fractions. Every weight W is a
+// Discretization (both schemes): minimize ½|u − u*|²_M + ½Δt |u|²_B + Δt Σ η |D u|²_W subject to
+// W_p ∇·(A u) = 0, where M = ρ W_u, A holds the faces' open (non-solid) area fractions and B the
+// faces' subgrid drag (VolumeFractions::faceResistance; the decoupled scheme applies it in its
+// projection). Every weight W is a
 // liquid-and-non-solid volume fraction of the sample's control volume, all taken from one sub-cell
 // sampling (see VolumeFractions), so they agree with each other.
 #pragma once
@@ -32,6 +34,10 @@ struct VolumeFractions {
     // Batty, Bertails & Bridson 2007. A binary open/closed face would quantize an aperture (the
     // cup's hole) to whole faces, and the drain rate through it with it.
     std::array<Field, 3> faceOpenArea;
+    // A face's subgrid resistance per unit viscosity, 1/m² (empty: none): its velocity feels a drag
+    // β = η R per unit volume, η being the mean of the two cells' viscosity. The calibrated cup hole
+    // sets it (see HoleCalibration in sim.h).
+    std::array<Field, 3> faceResistance;
 };
 
 struct StokesProblem {
