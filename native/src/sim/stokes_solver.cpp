@@ -303,9 +303,9 @@ CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vect
         compliance[r] = rows[r].compliance;
         x[r] = unknownField(s, rows[r])[rows[r].sample];  // warm start from the previous step
     }
-    const Vec uStar = gatherVelocity(s, u).cwiseProduct(u.mass).cwiseProduct(u.inverseMass);
+    const Vec uTilde = gatherVelocity(s, u).cwiseProduct(u.mass).cwiseProduct(u.inverseMass);
     Vec b;
-    multiply(h, uStar, b);
+    multiply(h, uTilde, b);
     // Pressure rows are −W_p ∇·u; aiming at ∇·u = d moves W_p d to the right-hand side.
     if (p.divergence != 0) {
         const std::vector<char> open = rowsThatCanChangeVolume(rows, u);
@@ -328,7 +328,7 @@ CgResult solveEliminated(const StokesProblem& p, StokesState& s, const std::vect
     const CgResult cg = conjugateGradient(apply, diagonal, b, x, p.tolerance, p.maxIterations);
 
     multiply(ht, x, faceForce);
-    scatterVelocity(uStar - p.dt * u.inverseMass.cwiseProduct(faceForce), u, s);
+    scatterVelocity(uTilde - p.dt * u.inverseMass.cwiseProduct(faceForce), u, s);
     for (size_t r = 0; r < rows.size(); ++r) unknownField(s, rows[r])[rows[r].sample] = x[r];
     return cg;
 }
