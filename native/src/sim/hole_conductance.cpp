@@ -85,7 +85,7 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
     // axis and full of liquid. Gravity drives the liquid through the hole: across the plate, the
     // pressure less its hydrostatic part (p + ρ g z) drops by ρ g L, L being the period along z.
     // Dagan's flux is for walls without slip, so the box has none; a scene's slip length acts on
-    // top of the scaled faces.
+    // top of the drag.
     Scene box;
     box.sourceFile = "hole calibration";
     const Vec3 lowCorner = Vec3(cells.x() - across / 2, cells.y() - across / 2,

@@ -7,9 +7,8 @@
 // Discretization (both schemes): minimize ½|u − u*|²_M + ½Δt |u|²_B + Δt Σ η |D u|²_W subject to
 // W_p ∇·(A u) = 0, where M = ρ W_u, A holds the faces' open (non-solid) area fractions and B the
 // faces' subgrid drag (VolumeFractions::faceResistance; the decoupled scheme applies it in its
-// projection). Every weight W is a
-// liquid-and-non-solid volume fraction of the sample's control volume, all taken from one sub-cell
-// sampling (see VolumeFractions), so they agree with each other.
+// projection). Every weight W is a liquid-and-non-solid volume fraction of the sample's control
+// volume, all taken from one sub-cell sampling (see VolumeFractions), so they agree with each other.
 #pragma once
 
 #include "sim/grid.h"
