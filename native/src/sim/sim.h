@@ -122,6 +122,9 @@ public:
     // Trilinear on the staggered grid; beyond the domain's walls, their ghosts (wallGhostRatio).
     Vec3 velocityAt(const Vec3& x) const;
     const SolidField& solids() const { return *solids_; }
+    // The level set surface tension takes its curvature from: the particles and their images
+    // across the walls, as cell-aligned voxels (negative in the liquid).
+    openvdb::FloatGrid::Ptr surfaceLevelSet() const;
     // One per cup with a hole, when scene().solver.holeConductance is Dagan.
     const std::vector<HoleCalibration>& holeCalibrations() const { return holeCalibrations_; }
 
