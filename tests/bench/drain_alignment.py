@@ -16,6 +16,7 @@ agrees between grids. Each grid runs with every hole conductance of --conductanc
         --frames 4,8 --conductances dagan,grid
 """
 import argparse
+import itertools
 import json
 import pathlib
 import statistics
@@ -57,34 +58,33 @@ def main():
     print(f"eta {args.viscosity} Pa·s, seed {args.seed}, cup shifted along {args.axis}; drained share (and tip, mm) at frames {frames}")
     means = {}
     with tempfile.TemporaryDirectory(prefix="drain_alignment_") as tmp:
-        for resolution in resolutions:
-            for conductance in conductances:
-                grid = f"{resolution}³ {conductance}"
-                dx = extent / resolution
-                shares = {f: [] for f in frames}
-                for shift in shifts:
-                    scene = json.loads(json.dumps(base))
-                    moved = next(s for s in scene["solids"] if s["type"] == "cup")
-                    for axis in axes:
-                        moved["position"][axis] = cup["position"][axis] + shift * dx
-                    scene.update(seed=args.seed, frames=max(frames),
-                                 output={"particles": True, "vdb": False, "mesh": False})
-                    scene["domain"]["resolution"] = resolution
-                    scene["material"]["viscosity"] = args.viscosity
-                    scene.setdefault("solver", {})["hole_conductance"] = conductance
-                    out = simulate(args.engine, scene, pathlib.Path(tmp) / f"{resolution}_{conductance}_{shift}",
-                                   f"{grid}, shift {shift}")
-                    bottom = moved["position"][2]
-                    row = []
-                    for f in frames:
-                        share, tip = drained_share_and_tip(out / f"particles_{f:05d}.bin", bottom)
-                        shares[f].append(share)
-                        row.append(f"{share:.4f} (tip {1000 * tip:.1f})")
-                    print(f"  {grid} shift {shift:4.2f}: " + " ".join(row), flush=True)
+        for resolution, conductance in itertools.product(resolutions, conductances):
+            grid = f"{resolution}³ {conductance}"
+            dx = extent / resolution
+            shares = {f: [] for f in frames}
+            for shift in shifts:
+                scene = json.loads(json.dumps(base))
+                moved = next(s for s in scene["solids"] if s["type"] == "cup")
+                for axis in axes:
+                    moved["position"][axis] = cup["position"][axis] + shift * dx
+                scene.update(seed=args.seed, frames=max(frames),
+                             output={"particles": True, "vdb": False, "mesh": False})
+                scene["domain"]["resolution"] = resolution
+                scene["material"]["viscosity"] = args.viscosity
+                scene.setdefault("solver", {})["hole_conductance"] = conductance
+                out = simulate(args.engine, scene, pathlib.Path(tmp) / f"{resolution}_{conductance}_{shift}",
+                               f"{grid}, shift {shift}")
+                bottom = moved["position"][2]
+                row = []
                 for f in frames:
-                    mean = statistics.fmean(shares[f])
-                    means.setdefault(f, {})[grid] = mean
-                    print(f"{grid} frame {f}: mean {mean:.4f}, spread {max(shares[f]) / min(shares[f]) - 1:+.1%}")
+                    share, tip = drained_share_and_tip(out / f"particles_{f:05d}.bin", bottom)
+                    shares[f].append(share)
+                    row.append(f"{share:.4f} (tip {1000 * tip:.1f})")
+                print(f"  {grid} shift {shift:4.2f}: " + " ".join(row), flush=True)
+            for f in frames:
+                mean = statistics.fmean(shares[f])
+                means.setdefault(f, {})[grid] = mean
+                print(f"{grid} frame {f}: mean {mean:.4f}, spread {max(shares[f]) / min(shares[f]) - 1:+.1%}")
     finest = f"{max(resolutions)}³ {conductances[0]}"  # what the ratios are against
     for f in frames:
         if len(means[f]) < 2:
