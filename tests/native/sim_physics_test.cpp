@@ -49,29 +49,46 @@ Vec3 angularMomentum(const sim::Simulation& s, const Vec3& centre) {
     return l;
 }
 
-// Stokes flow through the sample cup's hole (radius 9 mm, bottom 5 mm) with liquid on both sides:
-// the bottom spans a box 120 mm wide, periodic along z, at 32 cells (Δx = 3.75 mm, as the sample
-// cup's at 48³), and gravity drives the liquid through the hole. The cup sits `sideways` cells off
-// the faces' corners along x and y and `lift` cells above a row of z-faces. Returns the flux
-// through the row on the seam, below the bottom, over Dagan, Weinbaum & Pfeffer's orifice flux
-// Δp/(η (3/r³ + 8t/(π r⁴))), and the simulation's hole calibration in `calibration`. `steady`
+// Stokes flow through the sample cup's hole (radius 9 mm, bottom 5 mm) in a box 120 mm wide at 32
+// cells (Δx = 3.75 mm, as the sample cup's at 48³); gravity drives the liquid through the hole. The
+// cup sits `sideways` cells off the faces' corners along x and y and `lift` cells above a row of
+// z-faces. Exits:
+// - BothSides: the box is periodic along z and full of liquid, the bottom spanning it (Dagan,
+//   Weinbaum & Pfeffer's setting);
+// - FreeJet: a layer 4 hole radii deep inside the cup, with a jet as long hanging from the hole
+//   into air (the hole calibration's setting, but inside the cup's walls instead of periodic).
+// Returns the flux through the row of z-faces nearest the middle of the bottom over Dagan's orifice
+// flux Δp/(η (3/r³ + 8t/(π r⁴))), and the simulation's hole calibration in `calibration`. `steady`
 // reads it after one implicit step 10³ viscous times long (solved to a relative residual of 1e-8,
 // as gravity is nearly all borne by the bottom), otherwise after two frames.
 constexpr double kOrificeRadius = 0.009, kOrificeBottom = 0.005;
-double orificeFluxOverDagan(double sideways, double lift, const std::string& conductance, bool steady,
-                            sim::HoleCalibration* calibration = nullptr) {
-    const double width = 0.12, length = 0.06, rho = 1000, eta = 100, g = 9.81;
+enum class OrificeExit { BothSides, FreeJet };
+double orificeFluxOverDagan(OrificeExit exit, double sideways, double lift, const std::string& conductance,
+                            bool steady, sim::HoleCalibration* calibration = nullptr) {
+    const double width = 0.12, rho = 1000, eta = 100, g = 9.81, r = kOrificeRadius, t = kOrificeBottom;
     const int resolution = 32;
     const double dx = width / resolution;
+    const bool jet = exit == OrificeExit::FreeJet;
+    const double length = jet ? 28 * dx : 0.06, bottom = (jet ? 13 + lift : 8 + lift) * dx;
     json doc = baseScene(eta, resolution);
     doc["domain"] = {{"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}},
-                     {"resolution", resolution}, {"periodic", {false, false, true}}};
-    // Walls thicker than the box's half-diagonal: below the cup's bottom the liquid fills the box,
-    // above it the cup.
-    doc["solids"] = {{{"type", "cup"}, {"position", {sideways * dx, sideways * dx, (8 + lift) * dx}},
-                      {"inner_radius", 0.043}, {"height", 3}, {"wall_thickness", 0.05},
-                      {"bottom_thickness", kOrificeBottom}, {"hole_radius", kOrificeRadius}}};
-    doc["liquids"].push_back({{"type", "box"}, {"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}}});
+                     {"resolution", resolution}, {"periodic", {false, false, !jet}}};
+    // Walls thicker than the box's half-diagonal: below the cup's bottom the box, above it the cup.
+    const double innerRadius = 0.043;
+    doc["solids"] = {{{"type", "cup"}, {"position", {sideways * dx, sideways * dx, bottom}},
+                      {"inner_radius", innerRadius}, {"height", 3}, {"wall_thickness", 0.05},
+                      {"bottom_thickness", t}, {"hole_radius", r}}};
+    const double drop = jet ? 8 * r : length;  // ρ g × this across the hole
+    if (jet) {
+        const double half = 0.5 * std::sqrt(M_PI) * r;  // a square as wide as the hole
+        const double x = sideways * dx;
+        const double layer = M_PI * innerRadius * innerRadius * 4 * r + M_PI * r * r * t;  // hole included
+        doc["liquids"].push_back({{"type", "cup_fill"}, {"cup", 0}, {"volume", layer}});
+        doc["liquids"].push_back({{"type", "box"}, {"min", {x - half, x - half, bottom - 4 * r}},
+                                  {"max", {x + half, x + half, bottom}}});
+    } else {
+        doc["liquids"].push_back({{"type", "box"}, {"min", {-width / 2, -width / 2, 0}}, {"max", {width / 2, width / 2, length}}});
+    }
     doc["gravity"] = {0, 0, -g};
     doc["frames"] = 2;  // 67 ms, twice the box's viscous time ρ L²/η; every run is read alike
     doc["solver"] = {{"hole_conductance", conductance}};
@@ -81,13 +98,13 @@ double orificeFluxOverDagan(double sideways, double lift, const std::string& con
     else for (int f = 0; f < 2; ++f) s.advanceFrame();
     const sim::Field& w = s.fields().velocity[2];
     const sim::Field& open = s.fractions().faceOpenArea[2];
+    const int k = static_cast<int>(std::lround((bottom + 0.5 * t - s.grid().origin.z()) / dx));
     double q = 0;
     for (int j = 0; j < w.lattice.size[1]; ++j)
         for (int i = 0; i < w.lattice.size[0]; ++i)
-            q -= w[w.lattice.index(i, j, 0)] * open[open.lattice.index(i, j, 0)] * dx * dx;
+            q -= w[w.lattice.index(i, j, k)] * open[open.lattice.index(i, j, k)] * dx * dx;
     if (calibration && !s.holeCalibrations().empty()) *calibration = s.holeCalibrations().front();
-    const double r = kOrificeRadius, t = kOrificeBottom;
-    return q / (rho * g * length / (eta * (3 / (r * r * r) + 8 * t / (M_PI * r * r * r * r))));
+    return q / (rho * g * drop / (eta * (3 / (r * r * r) + 8 * t / (M_PI * r * r * r * r))));
 }
 
 }  // namespace
@@ -366,8 +383,8 @@ TEST(Physics, PipeFullOfLiquidCarriesPoiseuilleFlux) {
 // hole) and shut below it. Against Dagan's flux the faces alone carry 1.3–1.6×, by where the hole sits.
 TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
     for (const double sideways : {0.5, 0.0}) {  // the hole's axis on a column of z-faces, then between them
-        const double above = orificeFluxOverDagan(sideways, 1e-3, "grid", false);
-        const double below = orificeFluxOverDagan(sideways, -1e-3, "grid", false);
+        const double above = orificeFluxOverDagan(OrificeExit::BothSides, sideways, 1e-3, "grid", false);
+        const double below = orificeFluxOverDagan(OrificeExit::BothSides, sideways, -1e-3, "grid", false);
         std::printf("orifice, axis %.1f cell off the faces' corners: flux %.3f × Dagan with the bottom a thousandth "
                     "of a cell above a row of faces, %.3f below (%+.2f %%)\n",
                     sideways, above, below, 100 * (above / below - 1));
@@ -375,29 +392,25 @@ TEST(Physics, OrificeFluxDoesNotLeakThroughAHairlineCut) {
     }
 }
 
-// 2c. With the hole's conductance calibrated (the default; see HoleCalibration), the same box's
-// steady flux hardly depends on where the hole sits and matches Dagan's. The calibration solves
-// another box, a plate periodic along every axis, so this checks that its resistance carries over
-// to the cup in a box with walls, 1.6× as wide and with a period 0.76× as long. Measured: 1.005,
-// 0.999 and 1.006 × Dagan (spread 0.72 %), the faces alone 1.235, 1.487 and 1.271. When the
-// calibration scaled the faces' open area instead, 1.006, 1.008 and 1.015. Stepped over
-// frames instead, the flux creeps up in this closed box: with the drag (first placement only)
-// 1.006, 0.998, 1.015 and 1.028 after one to four frames; with the area scaled 0.98–1.00 after
-// one frame, 1.03–1.07 after two, 1.07–1.11 after four, with a spread of 2.6–4.1 %.
-TEST(Physics, CalibratedHoleFluxMatchesDaganWhereverItSits) {
+// 2c. With the hole's conductance calibrated (the default; see HoleCalibration), the steady flux
+// of a cup draining into a free jet hardly depends on where the hole sits and matches the free
+// exit's, sim::kFreeJetFluxOverDagan × Dagan's. The calibration solves another box, periodic
+// across x and y, so this checks that its resistance carries over to a layer held by the cup's
+// walls (4.8 hole radii from the axis instead of a periodic 4). FIXME Measured.
+TEST(Physics, CalibratedHoleFluxMatchesTheFreeExitWhereverItSits) {
     std::vector<double> fluxes;
     for (const auto& [sideways, lift] : std::vector<std::pair<double, double>>{{0, 0.667}, {0.5, 0.667}, {0.25, 0.25}}) {
         sim::HoleCalibration calibration;
-        const double grid = orificeFluxOverDagan(sideways, lift, "grid", true);
-        const double calibrated = orificeFluxOverDagan(sideways, lift, "dagan", true, &calibration);
-        std::printf("orifice, cup %.2f cell sideways and %.3f up: faces alone %.3f × Dagan, calibrated %.3f "
-                    "(resistance %.3f; in the calibration's own box %.3f before, %.3f after)\n",
+        const double grid = orificeFluxOverDagan(OrificeExit::FreeJet, sideways, lift, "grid", true);
+        const double calibrated = orificeFluxOverDagan(OrificeExit::FreeJet, sideways, lift, "dagan", true, &calibration);
+        std::printf("orifice into a free jet, cup %.2f cell sideways and %.3f up: faces alone %.3f × Dagan, calibrated "
+                    "%.3f (resistance %.3f; in the calibration's own box %.3f × Dagan before, %.3f after)\n",
                     sideways, lift, grid, calibrated, calibration.resistance, calibration.gridFlux, calibration.calibratedFlux);
-        EXPECT_NEAR(calibration.calibratedFlux, 1.0, 0.01);
-        fluxes.push_back(calibrated);
+        EXPECT_NEAR(calibration.calibratedFlux / sim::kFreeJetFluxOverDagan, 1.0, 0.01);
+        fluxes.push_back(calibrated / sim::kFreeJetFluxOverDagan);
     }
     const double spread = *std::max_element(fluxes.begin(), fluxes.end()) / *std::min_element(fluxes.begin(), fluxes.end()) - 1;
-    std::printf("orifice, calibrated: spread over placements %+.2f %%\n", 100 * spread);
+    std::printf("orifice into a free jet, calibrated: spread over placements %+.2f %%\n", 100 * spread);
     EXPECT_LT(spread, 0.03);
     for (const double flux : fluxes) EXPECT_NEAR(flux, 1.0, 0.03);
 }
