@@ -9,8 +9,9 @@ flow in a wide box. The flux is the particles' mean vertical velocity times the 
 period L. A placement "s:u" moves the cup s cells along x and y and u cells up, from the bottom's
 underside on a row of z-faces; the sample cup at 48³ sits as "0:0.667" here at resolution 32 (the
 same Δx), and at 96³ as "0:0.333" at resolution 64. Each placement runs with every hole conductance
-of --conductances: "grid" (the faces as they are) and "dagan" (the faces' open area calibrated, see
-HoleCalibration in native/src/sim/sim.h; the default).
+of --conductances: "grid" (the faces as they are) and "dagan" (the default: the hole's drag, see
+HoleCalibration in native/src/sim/sim.h, calibrated for a hole draining into a free jet, which passes
+more than Dagan's flux, so here, with liquid on both sides, it need not match Dagan's).
 
     /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32 --placements 0:0.667,0.25:0.667,0.5:0.667
     /usr/bin/python3 tests/bench/orifice_flux.py --resolutions 32,64 --placements 0:0.25,0.5:0.25
