@@ -96,8 +96,9 @@ struct Material {
 
 enum class StokesScheme { Unified, Decoupled };
 // How a cup's hole conducts liquid. Grid: as its cut faces do, which at a few cells across passes
-// up to 1.6× the Stokes flux, by where the grid sits. Dagan: those faces' open area scaled so that
-// the grid's steady Stokes flux through the hole matches Dagan, Weinbaum & Pfeffer's (see sim.h).
+// up to 1.7× the Stokes flux, by where the grid sits. Dagan: a drag on those faces, sized so that
+// the grid's steady Stokes flux into a free jet matches the free exit's, which is 1.2× Dagan,
+// Weinbaum & Pfeffer's flux with liquid on both sides (HoleCalibration in sim/sim.h).
 enum class HoleConductance { Dagan, Grid };
 
 struct SolverSettings {
