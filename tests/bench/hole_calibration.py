@@ -17,7 +17,6 @@ the error of a hole cut from whole faces being first order.
 """
 import argparse
 import json
-import math
 import pathlib
 import statistics
 import sys
@@ -25,7 +24,8 @@ import tempfile
 
 import numpy as np
 
-from viscosity_floor import simulate  # beside this script
+from orifice_flux import parse_grids_and_placements  # beside this script
+from viscosity_floor import simulate
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 HEIGHT = 0.18                # the sample scene's domain height: a resolution here is its 48³, 96³, …
@@ -56,13 +56,7 @@ def main():
     parser.add_argument("--placements", default="0:0.25,0.5:0.75,0:0.75,0.5:0.25",
                         help="comma-separated s:u, the cup moved s cells along x and y and u cells up")
     args = parser.parse_args()
-    try:
-        placements = [tuple(float(v) for v in p.split(":")) for p in args.placements.split(",")]
-        resolutions = [int(r) for r in args.resolutions.split(",")]
-    except ValueError as error:
-        sys.exit(f"hole_calibration: --placements takes s:u pairs and --resolutions integers ({error})")
-    if any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in placements):
-        sys.exit("hole_calibration: every placement must be two finite numbers s:u")
+    resolutions, placements = parse_grids_and_placements("hole_calibration", args.resolutions, args.placements)
     if not resolutions or min(resolutions) < 8:
         sys.exit("hole_calibration: --resolutions must be integers of at least 8")
 

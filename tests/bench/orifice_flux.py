@@ -47,6 +47,18 @@ def scene(resolution, sideways, up, conductance, viscosity, density, frames, see
             "output": {"particles": True, "vdb": False, "mesh": False}}
 
 
+def parse_grids_and_placements(script, resolutions, placements):
+    """--resolutions ("32,64") and --placements ("s:u,…") as lists; on a bad value exits with one line."""
+    try:
+        placements = [tuple(float(v) for v in p.split(":")) for p in placements.split(",")]
+        resolutions = [int(r) for r in resolutions.split(",")]
+    except ValueError as error:
+        sys.exit(f"{script}: --placements takes s:u pairs and --resolutions integers ({error})")
+    if any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in placements):
+        sys.exit(f"{script}: every placement must be two finite numbers s:u")
+    return resolutions, placements
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--engine", default=ROOT / "build/bin/viscoscope", type=pathlib.Path)
@@ -59,16 +71,10 @@ def main():
     parser.add_argument("--frames", type=int, default=3, help="frames simulated; the last one is read")
     parser.add_argument("--seed", type=int, default=3)
     args = parser.parse_args()
-    try:
-        placements = [tuple(float(v) for v in p.split(":")) for p in args.placements.split(",")]
-        resolutions = [int(r) for r in args.resolutions.split(",")]
-    except ValueError as error:
-        sys.exit(f"orifice_flux: --placements takes s:u pairs and --resolutions integers ({error})")
+    resolutions, placements = parse_grids_and_placements("orifice_flux", args.resolutions, args.placements)
     conductances = args.conductances.split(",")
     if not set(conductances) <= {"grid", "dagan"}:
         sys.exit(f"orifice_flux: --conductances takes grid and/or dagan, got {args.conductances}")
-    if any(len(p) != 2 or not all(math.isfinite(v) for v in p) for p in placements):
-        sys.exit("orifice_flux: every placement must be two finite numbers s:u")
     if not (args.viscosity > 0 and args.density > 0 and args.frames > 0):
         sys.exit("orifice_flux: --viscosity, --density and --frames must be positive")
 
