@@ -88,7 +88,7 @@ Grid sceneGrid(const Scene& scene);
 // Calibrated to Dagan's flux itself, in a box full of liquid on both sides of the plate, the drag
 // held the drain back once the hole emptied into a jet: at η = 1, 48³ drained 0.1201 by frame 8
 // against 0.1245 at 96³ (−3.6 %), its stream's tip 8.9 mm behind at frame 4; with the free exit's
-// target 0.1288 against 0.1267 (+1.7 %) and 4.7 mm.
+// target 0.1294 against 0.1273 (+1.7 %) and 4.7 mm.
 //
 // The box's faces converge to this flux as the lattice refines (tests/bench/hole_calibration.py,
 // the means over four placements fitted linearly in Δx): 1.372, 1.329, 1.301 and 1.288 × Dagan
