@@ -4,10 +4,12 @@ r"""How the sample cup's drain depends on where the cup sits against the grid.
 The cup of sample_scenes/capture_cup.json is moved by fractions of a cell (upwards, sideways along
 x, or along x and y at once) and simulated at several grids with the built engine; for each run the
 share of particles below the cup's bottom at the given frames is printed (and the stream's tip, its
-lowest particle's height, in mm), with the spread over the shifts (max/min − 1) per grid and the ratio
-of the grids' means. A drain that the discretization gets right does not depend on the shift, and
-agrees between grids. Each grid runs with every hole conductance of --conductances (see
-`hole_conductance` in the README): "dagan" (the calibrated drag, the default) and/or "grid".
+lowest particle's height, and the puddle's reach, the 99th percentile of the distance from the cup's
+axis of the particles within 20 mm of the ground, both in mm), with the spread over the shifts
+(max/min − 1) per grid and the ratio of the grids' means. A drain that the discretization gets
+right does not depend on the shift, and agrees between grids. Each grid runs with every hole
+conductance of --conductances (see `hole_conductance` in the README): "dagan" (the calibrated drag,
+the default) and/or "grid".
 
     /usr/bin/python3 tests/bench/drain_alignment.py --resolutions 48,64 --frames 10,30
     /usr/bin/python3 tests/bench/drain_alignment.py --resolutions 48,64,96,128 --shifts 0,0.5 --axis xy \
@@ -22,15 +24,21 @@ import pathlib
 import statistics
 import tempfile
 
+import numpy as np
+
 from viscosity_floor import read_particles, simulate  # beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
-def drained_share_and_tip(particles_file, bottom_z):
-    """Share of the particles in a "VSCP" file whose height is below bottom_z, and the lowest height."""
-    heights = read_particles(particles_file)[:, 2]
-    return float((heights < bottom_z).mean()), float(heights.min())
+def drained_share_tip_and_reach(particles_file, bottom_z, axis_xy, ground_z):
+    """Share of the particles in a "VSCP" file whose height is below bottom_z, the lowest height, and
+    the 99th percentile of the distance from axis_xy of those within 20 mm of ground_z (0: none)."""
+    positions = read_particles(particles_file)[:, :3]
+    heights = positions[:, 2]
+    near_ground = positions[heights < ground_z + 0.02]
+    reach = np.percentile(np.hypot(*(near_ground[:, :2] - axis_xy).T), 99) if len(near_ground) else 0.0
+    return float((heights < bottom_z).mean()), float(heights.min()), float(reach)
 
 
 def main():
@@ -55,7 +63,9 @@ def main():
     resolutions = [int(r) for r in args.resolutions.split(",")]
     conductances = args.conductances.split(",")
 
-    print(f"eta {args.viscosity} Pa·s, seed {args.seed}, cup shifted along {args.axis}; drained share (and tip, mm) at frames {frames}")
+    ground = next((s["height"] for s in base["solids"] if s["type"] == "ground"), base["domain"]["min"][2])
+    print(f"eta {args.viscosity} Pa·s, seed {args.seed}, cup shifted along {args.axis}; drained share "
+          f"(and tip, puddle's reach, mm) at frames {frames}")
     means = {}
     with tempfile.TemporaryDirectory(prefix="drain_alignment_") as tmp:
         for resolution, conductance in itertools.product(resolutions, conductances):
@@ -77,9 +87,10 @@ def main():
                 bottom = moved["position"][2]
                 row = []
                 for f in frames:
-                    share, tip = drained_share_and_tip(out / f"particles_{f:05d}.bin", bottom)
+                    share, tip, reach = drained_share_tip_and_reach(
+                        out / f"particles_{f:05d}.bin", bottom, moved["position"][:2], ground)
                     shares[f].append(share)
-                    row.append(f"{share:.4f} (tip {1000 * tip:.1f})")
+                    row.append(f"{share:.4f} (tip {1000 * tip:.1f}, puddle {1000 * reach:.1f})")
                 print(f"  {grid} shift {shift:4.2f}: " + " ".join(row), flush=True)
             for f in frames:
                 mean = statistics.fmean(shares[f])
