@@ -108,10 +108,11 @@ inline constexpr double kMinWeight = 1e-3;
 // empty would otherwise make the eliminated system arbitrarily stiff. The clamp is mass the liquid
 // does not have, on the faces at and beyond the surface that stress rows touch (and in the surface
 // tension's impulse), and it holds thin liquid back where viscosity couples those faces weakly
-// (Δt ν/Δx² ≈ 0.24 at η = 1 Pa·s, 48³). The sample cup's puddle (η = 1, seed 3; the 99th
-// percentile of its particles' distance from the axis at frame 60) reached 74.8 mm at 48³ with a
-// clamp of 5 %, 75.6 at 1 %, 76.1 at 0.2 % and at 0.05 %; 96³ reached 75.9 at 5 % and 75.7 at
-// 0.2 %. The solver's CG iterations over the run grew ×1.5 at 48³ and ×1.4 at 96³.
+// (Δt ν/Δx² ≈ 0.24 at η = 1 Pa·s, 48³). The sample cup's puddle at η = 1 (the 99th percentile of
+// the distance from the axis of the particles below 30 mm, at frame 60) reached 74.8 mm at 48³
+// (seed 3) with a clamp of 5 %, 75.6 at 1 %, 76.1 at 0.2 % and at 0.05 %; 96³ (seed 11) reached
+// 75.9 at 5 % and 75.7 at 0.2 %. The solver's CG iterations over the run grew ×1.5 at 48³ and
+// ×1.4 at 96³.
 inline constexpr double kMinMassFraction = 0.002;
 
 }  // namespace viscoscope::sim
