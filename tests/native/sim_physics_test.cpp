@@ -233,6 +233,29 @@ TEST(Physics, ReportedPressureIsHydrostaticInCutCells) {
 // liquid in the cells just under the bottom beside the hole. The particles' images across the walls
 // used to show the liquid in the hole and on the floor there, on the bottom's far side; a drop
 // hanging from the hole bent onto that false liquid, and its surface tension held the drop up.
+// The grid is lowered (by under a cell) until the cup's underside lies 2 % of a cell below a row
+// of z-faces, whatever the resolution, and still covers the whole domain (see sim::sceneGrid).
+TEST(Physics, GridPutsTheCupsUndersideJustBelowARowOfFaces) {
+    json doc;
+    std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;
+    for (const int resolution : {32, 48, 64, 96}) {
+        doc["domain"]["resolution"] = resolution;
+        const Scene scene = parseScene(doc, "sample cup");
+        const sim::Grid grid = sim::sceneGrid(scene);
+        const double underside = std::get<CupSolid>(scene.solids.at(1)).position.z();
+        const double height = (underside - grid.origin.z()) / grid.dx;
+        EXPECT_NEAR(height - std::floor(height), 0.98, 1e-9) << resolution << "³";
+        EXPECT_LE(grid.origin.z(), scene.domain.min.z());
+        EXPECT_GT(grid.origin.z(), scene.domain.min.z() - grid.dx);
+        EXPECT_GE(grid.origin.z() + grid.extent().z(), scene.domain.max.z() - 1e-12);
+        // Already placed: left as it is.
+        Scene placed = scene;
+        placed.domain.min.z() = grid.origin.z();
+        placed.domain.max.z() = grid.origin.z() + grid.dx * scene.cellCounts().z();
+        EXPECT_DOUBLE_EQ(sim::sceneGrid(placed).origin.z(), grid.origin.z());
+    }
+}
+
 TEST(Physics, NoLiquidAppearsUnderTheCupsThinBottom) {
     json doc;
     std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;

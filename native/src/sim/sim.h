@@ -68,7 +68,8 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
                                          const Vec3& origin, int smoothingPasses,
                                          double halfWidth = kDefaultBandHalfWidth, double inset = 0.0);
 
-// The MAC grid a simulation of `scene` runs on.
+// The MAC grid a simulation of `scene` runs on: the domain's, lowered by under a cell (and one cell
+// taller) so that the underside of the first cup with a hole lies just below a row of z-faces.
 Grid sceneGrid(const Scene& scene);
 
 // A cup's hole a few cells across passes more liquid than it should: its faces' open areas give its
