@@ -47,7 +47,8 @@ def main():
     parser.add_argument("--scene", default=ROOT / "sample_scenes/capture_cup.json", type=pathlib.Path)
     parser.add_argument("--resolutions", default="48,64,80")
     parser.add_argument("--shifts", default="0,0.25,0.5,0.75", help="cup shifts in cells")
-    parser.add_argument("--axis", default="z", choices=["x", "y", "z", "xy"], help="the axes the cup moves along")
+    parser.add_argument("--axis", default="xy", choices=["x", "y", "z", "xy"],
+                        help="the axes the cup moves along (along z the grid follows its underside: sim::sceneGrid)")
     parser.add_argument("--frames", default="10", help="frames at which the drained share is read")
     parser.add_argument("--viscosity", type=float, default=10.0)
     parser.add_argument("--seed", type=int, default=3)
