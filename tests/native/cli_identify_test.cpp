@@ -202,6 +202,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["area_track_weight"] = -1.0;
         expectBadInput(writeJob(doc, "area_weight.json"), "area_track_weight: must be ≥ 0");
     }
+    {  // a negative height for the ground band
+        json doc = job();
+        doc["ground_band"] = -0.01;
+        expectBadInput(writeJob(doc, "band.json"), "ground_band: must be ≥ 0");
+    }
     {  // an unknown way of comparing silhouettes
         json doc = job();
         doc["silhouette_comparison"] = "columns";

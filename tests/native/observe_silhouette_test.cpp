@@ -153,6 +153,30 @@ TEST(Objective, RowWidthsIgnoreSidewaysShifts) {
     EXPECT_THROW(parseSilhouetteComparison("rows", "job"), InputError);
 }
 
+TEST(Objective, LeavesOutTheRowsOfTheGroundBand) {
+    // The outlet of a cup 10 cm above the ground, seen level from 0.5 m at 5 cm high, 100 px focal:
+    // the ground at the outlet projects to y = 33.5, the band's top (2.5 cm) to 28.5: rows 29 and below go.
+    Scene scene;
+    scene.solids = {GroundSolid{0.0}, CupSolid{{0, 0, 0.1}}};
+    const PinholeCamera camera = cameraLookingAlongY(64, 48, 100, {0, -0.5, 0.05});
+    EXPECT_DOUBLE_EQ(defaultGroundBand(scene), 0.025);
+    cv::Mat1b compared(48, 64, uchar(255));
+    compared.col(0).setTo(0);  // an exclusion already there stays
+    const cv::Mat1b banded = excludeGroundBand(compared, camera, scene, 0.025);
+    EXPECT_EQ(cv::countNonZero(banded.rowRange(0, 29)), 29 * 63);
+    EXPECT_EQ(cv::countNonZero(banded.rowRange(29, 48)), 0);
+    EXPECT_EQ(cv::countNonZero(excludeGroundBand({}, camera, scene, 0.025)), 29 * 64);  // empty: all pixels
+    EXPECT_EQ(cv::countNonZero(excludeGroundBand(compared, camera, scene, 0.0)), 48 * 63);
+    // No band without a ground, or without a cup with a hole to fall from.
+    Scene noGround = scene;
+    noGround.solids = {CupSolid{{0, 0, 0.1}}};
+    EXPECT_EQ(defaultGroundBand(noGround), 0);
+    EXPECT_TRUE(excludeGroundBand({}, camera, noGround, 0.025).empty());
+    Scene noHole = scene;
+    std::get<CupSolid>(noHole.solids[1]).holeRadius = 0;
+    EXPECT_EQ(cv::countNonZero(excludeGroundBand(compared, camera, noHole, 0.025)), 48 * 63);
+}
+
 TEST(Objective, FollowsEquationNine) {
     const cv::Size size(4, 4);
     const cv::Mat1b simulated = maskFromRects(size, {{0, 0, 2, 4}});  // left half

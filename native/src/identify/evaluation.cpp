@@ -95,7 +95,7 @@ Observation loadObservation(const Job& job) {
         throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
                          std::to_string(job.camera.height) + ", reference masks are " + std::to_string(ref.width) +
                          "x" + std::to_string(ref.height));
-    obs.compared = ref.comparedPixels();
+    obs.compared = excludeGroundBand(ref.comparedPixels(), job.camera, job.scene, job.groundBand);
     obs.masks.resize(ref.frames.size());
     obs.simFrames.assign(ref.frames.size(), -1);
     int used = 0;

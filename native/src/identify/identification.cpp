@@ -825,6 +825,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                                      "; θ* is the best full-fidelity evaluation"},
              {"resumed_from_generation", resumedFrom},
              {"reference_informative_frames", informativeFrames},
+             {"ground_band_m", job.groundBand},
              {"warnings", warnings},
              {"history", generations},
              {"evaluated", evaluated},

@@ -6,7 +6,10 @@
 
 #include <opencv2/core.hpp>
 
+#include <cmath>
 #include <cstdlib>
+#include <optional>
+#include <variant>
 
 namespace viscoscope {
 
@@ -104,6 +107,44 @@ double normalizedSquaredError(const std::vector<double>& simulated, const std::v
     }
     if (!(squaredReference > 0)) throw InputError("scalar track: the reference track is all zero");
     return squaredError / squaredReference;
+}
+
+namespace {
+// The outlet (the centre of the first holed cup's underside) and the ground's height below it.
+struct Outlet {
+    Eigen::Vector3d position;
+    double ground = 0;
+};
+std::optional<Outlet> findOutlet(const Scene& scene) {
+    std::optional<double> ground;
+    const CupSolid* cup = nullptr;
+    for (const Solid& solid : scene.solids) {
+        if (const auto* g = std::get_if<GroundSolid>(&solid); g && !ground) ground = g->height;
+        if (const auto* c = std::get_if<CupSolid>(&solid); c && c->holeRadius > 0 && !cup) cup = c;
+    }
+    if (!ground || !cup || cup->position.z() <= *ground) return std::nullopt;
+    return Outlet{cup->position, *ground};
+}
+}  // namespace
+
+double defaultGroundBand(const Scene& scene) {
+    const std::optional<Outlet> outlet = findOutlet(scene);
+    return outlet ? 0.25 * (outlet->position.z() - outlet->ground) : 0.0;
+}
+
+cv::Mat1b excludeGroundBand(const cv::Mat1b& compared, const PinholeCamera& camera, const Scene& scene, double band) {
+    const std::optional<Outlet> outlet = findOutlet(scene);
+    if (!(band > 0) || !outlet) return compared;
+    Eigen::Vector3d onGround = outlet->position, bandTop = outlet->position;
+    onGround.z() = outlet->ground;
+    bandTop.z() = outlet->ground + band;
+    if (toCameraFrame(camera, onGround).z() <= 0 || toCameraFrame(camera, bandTop).z() <= 0) return compared;
+    const double groundRow = project(camera, onGround).y(), topRow = project(camera, bandTop).y();
+    cv::Mat1b result = compared.empty() ? cv::Mat1b(camera.height, camera.width, uchar(255)) : compared.clone();
+    for (int row = 0; row < result.rows; ++row)
+        if ((groundRow > topRow && row > topRow) || (groundRow < topRow && row < topRow))  // row centres at integers
+            result.row(row).setTo(0);
+    return result;
 }
 
 double totalObjective(const std::vector<ObjectiveTerm>& terms) {
