@@ -207,6 +207,16 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["ground_band"] = -0.01;
         expectBadInput(writeJob(doc, "band.json"), "ground_band: must be ≥ 0");
     }
+    {  // a ground band reaching the outlet of a cup 3 cm above the ground: nothing left to compare
+        json doc = job();
+        json scene = json::parse(slurp(dir_ / "scene.json"));
+        scene["solids"].push_back({{"type", "cup"}, {"position", {0.05, 0.02, 0.03}}, {"inner_radius", 0.01},
+                                   {"height", 0.02}, {"wall_thickness", 0.003}, {"bottom_thickness", 0.003},
+                                   {"hole_radius", 0.003}});
+        doc["scene"] = scene;
+        doc["ground_band"] = 0.03;
+        expectBadInput(writeJob(doc, "band_high.json"), "ground_band: must be below the outlet");
+    }
     {  // an unknown way of comparing silhouettes
         json doc = job();
         doc["silhouette_comparison"] = "columns";

@@ -159,7 +159,7 @@ TEST(Objective, LeavesOutTheRowsOfTheGroundBand) {
     Scene scene;
     scene.solids = {GroundSolid{0.0}, CupSolid{{0, 0, 0.1}}};
     const PinholeCamera camera = cameraLookingAlongY(64, 48, 100, {0, -0.5, 0.05});
-    EXPECT_DOUBLE_EQ(defaultGroundBand(scene), 0.025);
+    EXPECT_DOUBLE_EQ(outletHeight(scene), 0.1);
     cv::Mat1b compared(48, 64, uchar(255));
     compared.col(0).setTo(0);  // an exclusion already there stays
     const cv::Mat1b banded = excludeGroundBand(compared, camera, scene, 0.025);
@@ -170,7 +170,7 @@ TEST(Objective, LeavesOutTheRowsOfTheGroundBand) {
     // No band without a ground, or without a cup with a hole to fall from.
     Scene noGround = scene;
     noGround.solids = {CupSolid{{0, 0, 0.1}}};
-    EXPECT_EQ(defaultGroundBand(noGround), 0);
+    EXPECT_EQ(outletHeight(noGround), 0);
     EXPECT_TRUE(excludeGroundBand({}, camera, noGround, 0.025).empty());
     Scene noHole = scene;
     std::get<CupSolid>(noHole.solids[1]).holeRadius = 0;

@@ -146,8 +146,14 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
 
     job.areaTrackWeight = optionalNumber(doc, "area_track_weight", job.areaTrackWeight, origin);
     if (!(job.areaTrackWeight >= 0)) throw InputError(origin + ": area_track_weight: must be ≥ 0");
-    job.groundBand = optionalNumber(doc, "ground_band", defaultGroundBand(job.scene), origin);
+    const double fall = outletHeight(job.scene);
+    job.groundBand = optionalNumber(doc, "ground_band", kDefaultGroundBandShare * fall, origin);
     if (job.groundBand < 0) throw InputError(origin + ": ground_band: must be ≥ 0 (m)");
+    if (fall > 0 && job.groundBand >= fall) {
+        char height[32];
+        std::snprintf(height, sizeof height, "%.3g", fall);
+        throw InputError(origin + ": ground_band: must be below the outlet, " + height + " m above the ground");
+    }
 
     // Blender's frame_start is simulation time 0 and video frame 0; frames after frame_end are ignored.
     const int frameStart = optionalInt(doc, "frame_start", 0, -1000000, origin);

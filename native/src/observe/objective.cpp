@@ -6,7 +6,6 @@
 
 #include <opencv2/core.hpp>
 
-#include <cmath>
 #include <cstdlib>
 #include <optional>
 #include <variant>
@@ -37,6 +36,22 @@ long long countPixels(const cv::Mat1b& simulated, const cv::Mat1b& reference, co
             if ((c == nullptr || c[col] != 0) && predicate(g[col] != 0, gHat[col] != 0)) ++count;
     }
     return count;
+}
+
+// The outlet (the centre of the first holed cup's underside) and the ground's height below it.
+struct Outlet {
+    Eigen::Vector3d position;
+    double ground = 0;
+};
+std::optional<Outlet> findOutlet(const Scene& scene) {
+    std::optional<double> ground;
+    const CupSolid* cup = nullptr;
+    for (const Solid& solid : scene.solids) {
+        if (const auto* g = std::get_if<GroundSolid>(&solid); g && !ground) ground = g->height;
+        if (const auto* c = std::get_if<CupSolid>(&solid); c && c->holeRadius > 0 && !cup) cup = c;
+    }
+    if (!ground || !cup || cup->position.z() <= *ground) return std::nullopt;
+    return Outlet{cup->position, *ground};
 }
 
 }  // namespace
@@ -109,27 +124,9 @@ double normalizedSquaredError(const std::vector<double>& simulated, const std::v
     return squaredError / squaredReference;
 }
 
-namespace {
-// The outlet (the centre of the first holed cup's underside) and the ground's height below it.
-struct Outlet {
-    Eigen::Vector3d position;
-    double ground = 0;
-};
-std::optional<Outlet> findOutlet(const Scene& scene) {
-    std::optional<double> ground;
-    const CupSolid* cup = nullptr;
-    for (const Solid& solid : scene.solids) {
-        if (const auto* g = std::get_if<GroundSolid>(&solid); g && !ground) ground = g->height;
-        if (const auto* c = std::get_if<CupSolid>(&solid); c && c->holeRadius > 0 && !cup) cup = c;
-    }
-    if (!ground || !cup || cup->position.z() <= *ground) return std::nullopt;
-    return Outlet{cup->position, *ground};
-}
-}  // namespace
-
-double defaultGroundBand(const Scene& scene) {
+double outletHeight(const Scene& scene) {
     const std::optional<Outlet> outlet = findOutlet(scene);
-    return outlet ? 0.25 * (outlet->position.z() - outlet->ground) : 0.0;
+    return outlet ? outlet->position.z() - outlet->ground : 0.0;
 }
 
 cv::Mat1b excludeGroundBand(const cv::Mat1b& compared, const PinholeCamera& camera, const Scene& scene, double band) {

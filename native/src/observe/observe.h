@@ -252,16 +252,19 @@ double totalObjective(const std::vector<ObjectiveTerm>& terms);
 
 // The puddle's rows: on a coarse identification grid the liquid spreading on the ground is
 // resolved worst, and its radius grows only as η^(-1/8), so it says little about η and much about
-// Δx. The sample cup at η = 10 (a 96³ reference, 48³ at seed 3; row-width E summed over frames
-// 1–60 at η = 8 / 8.8 / 9 / 9.5 / 10 / 10.5 / 11 / 12, ×10⁻³): the rows above a band 27 mm high
-// scored 46 / 38 / 35 / 29 / 26 / 32 / 40 / 49, least at the truth, while the band's own rows
-// scored 58 / 49 / 60 / 49 / 65 / 61 / 80 / 92, least 5–12 % below it.
+// Δx. The sample cup (a 96³ reference, 48³ at seed 3; row-width E summed over frames 1–60, ×10⁻³),
+// rows above and in the default band (25 mm):
+//   η = 10, at 8 / 8.8 / 9 / 9.5 / 10 / 10.5 / 11 / 12: above 50 / 41 / 38 / 31 / 28 / 35 / 43 / 52,
+//   least at the truth; in it 55 / 46 / 57 / 46 / 63 / 58 / 77 / 89, least 5–12 % below it.
+//   η = 1, at 0.7 / 0.85 / 0.93 / 1 / 1.07 / 1.15 / 1.3: above 36 / 35 / 34 / 35 / 39 / 41 / 45,
+//   nearly flat (a stream 6 px wide that hardly narrows with η); in it 85 / 83 / 129 / 178 / 221 /
+//   269 / 348, least 15 % below the truth. Neither finds η = 1.
 // The band is the image rows on the ground's side of the point `band` metres above the ground on
 // the axis of the first cup with a hole (its outlet); `compared` is returned with them set to 0
 // (an empty `compared`, all pixels, becomes a mask of the camera's size first). Unchanged when
-// band is 0, the scene has no ground or no cup with a hole, or the camera sees neither point.
+// band is 0, the scene has no ground or no cup with a hole, or either point is behind the camera.
 cv::Mat1b excludeGroundBand(const cv::Mat1b& compared, const PinholeCamera& camera, const Scene& scene, double band);
-// A quarter of the outlet's height above the ground (0 without a ground or a cup with a hole).
-double defaultGroundBand(const Scene& scene);
+// The outlet's height above the ground (0 without a ground or a cup with a hole).
+double outletHeight(const Scene& scene);
 
 }  // namespace viscoscope
