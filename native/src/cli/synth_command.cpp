@@ -91,12 +91,6 @@ TriangleMesh containerMesh(const Scene& scene) {
     return all;
 }
 
-std::optional<double> groundHeight(const Scene& scene) {
-    for (const Solid& solid : scene.solids)
-        if (const auto* ground = std::get_if<GroundSolid>(&solid)) return ground->height;
-    return std::nullopt;
-}
-
 // A wrong camera (looking away, behind the scene) fails here, before any simulation: the liquid
 // never leaves the domain box.
 void requireDomainInView(const Scene& scene, const PinholeCamera& camera, const std::string& cameraFile) {

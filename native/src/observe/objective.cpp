@@ -8,7 +8,6 @@
 
 #include <cstdlib>
 #include <optional>
-#include <variant>
 
 namespace viscoscope {
 
@@ -44,12 +43,8 @@ struct Outlet {
     double ground = 0;
 };
 std::optional<Outlet> findOutlet(const Scene& scene) {
-    std::optional<double> ground;
-    const CupSolid* cup = nullptr;
-    for (const Solid& solid : scene.solids) {
-        if (const auto* g = std::get_if<GroundSolid>(&solid); g && !ground) ground = g->height;
-        if (const auto* c = std::get_if<CupSolid>(&solid); c && c->holeRadius > 0 && !cup) cup = c;
-    }
+    const std::optional<double> ground = groundHeight(scene);
+    const CupSolid* cup = firstHoledCup(scene);
     if (!ground || !cup || cup->position.z() <= *ground) return std::nullopt;
     return Outlet{cup->position, *ground};
 }

@@ -422,4 +422,16 @@ json sceneToJson(const Scene& s) {
     };
 }
 
+std::optional<double> groundHeight(const Scene& scene) {
+    for (const Solid& solid : scene.solids)
+        if (const auto* ground = std::get_if<GroundSolid>(&solid)) return ground->height;
+    return std::nullopt;
+}
+
+const CupSolid* firstHoledCup(const Scene& scene) {
+    for (const Solid& solid : scene.solids)
+        if (const auto* cup = std::get_if<CupSolid>(&solid); cup && cup->holeRadius > 0) return cup;
+    return nullptr;
+}
+
 }  // namespace viscoscope

@@ -144,5 +144,9 @@ Scene loadScene(const std::filesystem::path& file);
 // hole spanning fewer cells than the drain rate needs.
 std::vector<std::string> resolutionWarnings(const Scene& scene);
 nlohmann::json sceneToJson(const Scene& scene);
+// The first ground plane's height, if the scene has one.
+std::optional<double> groundHeight(const Scene& scene);
+// The first cup with a hole: where the liquid leaves (nullptr: none).
+const CupSolid* firstHoledCup(const Scene& scene);
 
 }  // namespace viscoscope

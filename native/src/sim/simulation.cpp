@@ -139,20 +139,16 @@ Grid sceneGrid(const Scene& scene) {
     grid.dx = scene.cellSize();
     grid.cells = scene.cellCounts();
     grid.periodic = scene.domain.periodic;
-    if (grid.periodic[2]) return grid;
-    for (const Solid& solid : scene.solids) {
-        const auto* cup = std::get_if<CupSolid>(&solid);
-        if (!cup || cup->holeRadius <= 0) continue;
-        constexpr double kUndersideBelowFace = 0.02;  // cells
-        const double height = (cup->position.z() - grid.origin.z()) / grid.dx;
-        double lowering = (1 - kUndersideBelowFace) - (height - std::floor(height));
-        if (lowering < 0) lowering += 1;
-        constexpr double kPlaced = 1e-9;  // cells: already placed, but for rounding
-        if (lowering > kPlaced && lowering < 1 - kPlaced) {
-            grid.origin.z() -= lowering * grid.dx;
-            ++grid.cells[2];
-        }
-        break;
+    const CupSolid* cup = firstHoledCup(scene);
+    if (grid.periodic[2] || !cup) return grid;
+    constexpr double kUndersideBelowFace = 0.02;  // cells
+    const double height = (cup->position.z() - grid.origin.z()) / grid.dx;
+    double lowering = (1 - kUndersideBelowFace) - (height - std::floor(height));
+    if (lowering < 0) lowering += 1;
+    constexpr double kPlaced = 1e-9;  // cells: already placed, but for rounding
+    if (lowering > kPlaced && lowering < 1 - kPlaced) {
+        grid.origin.z() -= lowering * grid.dx;
+        ++grid.cells[2];
     }
     return grid;
 }
