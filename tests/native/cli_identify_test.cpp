@@ -205,7 +205,7 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
     {  // a negative height for the ground band
         json doc = job();
         doc["ground_band"] = -0.01;
-        expectBadInput(writeJob(doc, "band.json"), "ground_band: must be ≥ 0");
+        expectBadInput(writeJob(doc, "band.json"), "ground_band: must be a finite number ≥ 0");
     }
     {  // a ground band reaching the outlet of a cup 3 cm above the ground: nothing left to compare
         json doc = job();

@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -153,6 +154,69 @@ TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {
     std::printf("E against an empty reference: %.5f clipped, %.5f not\n", clippedE, unclippedE);
     EXPECT_GT(clippedE, 0);
     EXPECT_LT(clippedE, 0.99 * unclippedE);  // the same surfaces: without the cut the two are equal
+}
+
+// --ground-band leaves out the rows of the band as identify's ground_band does. A cup's outlet 3 cm
+// above the ground, seen level from 30 cm at 2 cm above the ground; against an empty reference, E
+// by pixels is the area of a wall of "liquid" from the ground to 4 cm, so the band (1 cm) must cut
+// it to the share of its rows above the band's top.
+TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
+    const fs::path black = dir_ / "black.mp4";
+    ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i color=c=black:size=96x72:rate=10 -frames:v 3 -c:v mpeg4 " +
+                           black.string()).c_str()),
+              0);
+    ASSERT_EQ(run("extract " + black.string() + " --out " + (dir_ / "ref").string() + " --background-frames 1").exitCode, 0);
+    const nlohmann::json scene{
+        {"format", "viscoscope.scene"}, {"version", 1},
+        {"domain", {{"min", {-0.05, -0.05, 0}}, {"max", {0.05, 0.05, 0.1}}, {"resolution", 16}}},
+        {"solids", {{{"type", "ground"}, {"height", 0.0}},
+                    {{"type", "cup"}, {"position", {0, 0, 0.03}}, {"inner_radius", 0.01}, {"height", 0.02},
+                     {"wall_thickness", 0.003}, {"bottom_thickness", 0.003}, {"hole_radius", 0.003}}}},
+        {"liquids", {{{"type", "cup_fill"}, {"cup", 1}, {"volume", 1e-6}}}},
+        {"material", {{"density", 1000}, {"viscosity", 10.0}}}, {"fps", 30}, {"frames", 2}};
+    std::ofstream(dir_ / "scene.json") << scene.dump();
+    const double f = 400, cy = 35.5, eye = 0.02, distance = 0.3;
+    const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
+                                {"K", {{f, 0, 47.5}, {0, f, cy}, {0, 0, 1}}},
+                                {"distortion", {0, 0, 0, 0, 0}},
+                                {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
+                                {"t", {0, eye, distance}}};
+    std::ofstream(dir_ / "camera.json") << camera.dump();
+    const fs::path sim = dir_ / "sim";
+    fs::create_directories(sim);
+    for (int frame = 0; frame < 3; ++frame)
+        std::ofstream(sim / ("frame_0000" + std::to_string(frame) + ".obj"))
+            << "v -0.02 0 0\nv 0.02 0 0\nv 0.02 0 0.04\nv -0.02 0 0.04\nf 1 2 3\nf 1 3 4\n";
+    const std::string common = "score --comparison pixels --progress none --camera " + (dir_ / "camera.json").string() +
+                               " --reference " + (dir_ / "ref").string() + " --sim " + sim.string() + " --scene " +
+                               (dir_ / "scene.json").string();
+    auto score = [&](const std::string& name, const std::string& band) {
+        const CommandResult scored = run(common + " --out " + (dir_ / name).string() + band);
+        EXPECT_EQ(scored.exitCode, 0) << scored.err;
+        return nlohmann::json::parse(slurp(dir_ / name / "score.json"));
+    };
+    const nlohmann::json all = score("all", ""), banded = score("banded", " --ground-band 0.01");
+    EXPECT_EQ(all.at("ground_band_m").get<double>(), 0.0);
+    EXPECT_EQ(banded.at("ground_band_m").get<double>(), 0.01);
+    // Image rows of the wall's top, of the band's top and of the ground (row centres at integers).
+    auto row = [&](double z) { return cy + f * (eye - z) / distance; };
+    const double top = row(0.04), bandTop = row(0.01), ground = row(0.0);
+    const double kept = std::floor(bandTop) - std::ceil(top) + 1, rows = std::floor(ground) - std::ceil(top) + 1;
+    const double ratio = banded.at("E").get<double>() / all.at("E").get<double>();
+    std::printf("E with the band / without: %.4f (rows kept %g of %g)\n", ratio, kept, rows);
+    EXPECT_NEAR(ratio, kept / rows, 1.5 / rows);  // the wall's edge rows may be drawn or not
+
+    const fs::path out = dir_ / "bad";
+    for (const char* band : {" --ground-band -0.01", " --ground-band nan", " --ground-band 0.03"}) {
+        const CommandResult bad = run(common + " --out " + out.string() + band);
+        expectBadInput(bad, out);
+        EXPECT_NE(bad.err.find("--ground-band"), std::string::npos) << bad.err;
+    }
+    const CommandResult sceneless = run("score --progress none --camera " + (dir_ / "camera.json").string() +
+                                        " --reference " + (dir_ / "ref").string() + " --sim " + sim.string() +
+                                        " --out " + out.string() + " --ground-band 0.01");
+    expectBadInput(sceneless, out);
+    EXPECT_NE(sceneless.err.find("needs the scene"), std::string::npos) << sceneless.err;
 }
 
 // Phones store portrait clips as landscape frames plus a rotation tag; masks must come out upright.

@@ -25,6 +25,7 @@ struct ScoreArguments {
     std::string camera, reference, sim, scene, outDir, progress = "text",
                 comparison = silhouetteComparisonName(kDefaultSilhouetteComparison);
     int simFirst = 0;
+    double groundBand = 0;
     bool fast = false;
 };
 
@@ -78,21 +79,17 @@ std::vector<Eigen::Vector3d> boundingBoxCorners(const openvdb::FloatGrid& grid) 
     return corners;
 }
 
-// The scene's solids, from --scene or else the scene `simulate` recorded in SIM/simulation.json;
-// none when neither is there (a folder of another program's surfaces).
-std::unique_ptr<sim::SolidField> sceneSolids(const ScoreArguments& args) {
-    std::optional<Scene> scene;
-    if (!args.scene.empty()) {
-        scene = loadScene(args.scene);
-    } else if (const fs::path record = fs::path(args.sim) / "simulation.json"; fs::exists(record)) {
-        std::ifstream stream(record);
-        const nlohmann::json doc = nlohmann::json::parse(stream, nullptr, false);
-        if (doc.is_discarded() || !doc.contains("scene"))
-            throw InputError(record.string() + ": not a simulation record with a \"scene\"");
-        scene = parseScene(doc["scene"], record.string() + ": scene");
-    }
-    if (!scene) return nullptr;
-    return std::make_unique<sim::SolidField>(scene->solids, sim::sceneGrid(*scene));
+// --scene, or else the scene `simulate` recorded in SIM/simulation.json; none when neither is there
+// (a folder of another program's surfaces).
+std::optional<Scene> scoredScene(const ScoreArguments& args) {
+    if (!args.scene.empty()) return loadScene(args.scene);
+    const fs::path record = fs::path(args.sim) / "simulation.json";
+    if (!fs::exists(record)) return std::nullopt;
+    std::ifstream stream(record);
+    const nlohmann::json doc = nlohmann::json::parse(stream, nullptr, false);
+    if (doc.is_discarded() || !doc.contains("scene"))
+        throw InputError(record.string() + ": not a simulation record with a \"scene\"");
+    return parseScene(doc["scene"], record.string() + ": scene");
 }
 
 // A surface's silhouette; with `solids`, as identify draws it: the parts of the particle spheres
@@ -129,9 +126,16 @@ int runScore(const ScoreArguments& args) {
                          std::to_string(camera.height) + ", reference masks are " + std::to_string(reference.width) +
                          "x" + std::to_string(reference.height));
     if (!fs::is_directory(args.sim)) throw InputError(args.sim + ": simulation folder not found");
-    const cv::Mat1b compared = reference.comparedPixels();
     const SilhouetteComparison comparison = parseSilhouetteComparison(args.comparison, "--comparison");
-    const std::unique_ptr<sim::SolidField> solids = sceneSolids(args);
+    const std::optional<Scene> scene = scoredScene(args);
+    cv::Mat1b compared = reference.comparedPixels();
+    if (args.groundBand != 0) {
+        if (!scene) throw InputError("--ground-band: needs the scene: give --scene (SIM has no simulation.json)");
+        requireGroundBandBelowOutlet(*scene, args.groundBand, "--ground-band");
+        compared = excludeGroundBand(compared, camera, *scene, args.groundBand);
+    }
+    const std::unique_ptr<sim::SolidField> solids =
+        scene ? std::make_unique<sim::SolidField>(scene->solids, sim::sceneGrid(*scene)) : nullptr;
     bool clipped = solids != nullptr;  // and every frame a level set (meshes are drawn as they are)
     fs::create_directories(args.outDir);
     fs::remove(fs::path(args.outDir) / "score.json");
@@ -164,7 +168,7 @@ int runScore(const ScoreArguments& args) {
     }
     const nlohmann::json score{{"format", "viscoscope.score"}, {"version", 1},
                                {"silhouette", args.fast ? "fast" : "exact"}, {"comparison", args.comparison},
-                               {"clipped_to_solids", clipped},
+                               {"clipped_to_solids", clipped}, {"ground_band_m", args.groundBand},
                                {"camera", args.camera},       {"reference", args.reference},
                                {"sim", args.sim},             {"pixels", reference.width * reference.height},
                                {"E", objective},              {"frames", frames}};
@@ -184,6 +188,10 @@ Command addScoreCommand(CLI::App& app) {
         ->required();
     sub->add_option("--scene", args->scene,
                     "Scene whose solids clip the surfaces, as identify does (default: SIM/simulation.json's)");
+    sub->add_option("--ground-band", args->groundBand,
+                    "Leave out the image rows this many metres above the ground at the outlet, as identify's "
+                    "ground_band does (needs the scene; 0 compares every row)")
+        ->capture_default_str();
     sub->add_option("--sim-first", args->simFirst, "Number of the simulation frame matching the first reference frame")
         ->capture_default_str();
     sub->add_option("--out", args->outDir, "Output folder (score.json, diff_%05d.png)")->required();

@@ -146,14 +146,8 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
 
     job.areaTrackWeight = optionalNumber(doc, "area_track_weight", job.areaTrackWeight, origin);
     if (!(job.areaTrackWeight >= 0)) throw InputError(origin + ": area_track_weight: must be ≥ 0");
-    const double fall = outletHeight(job.scene);
-    job.groundBand = optionalNumber(doc, "ground_band", kDefaultGroundBandShare * fall, origin);
-    if (job.groundBand < 0) throw InputError(origin + ": ground_band: must be ≥ 0 (m)");
-    if (fall > 0 && job.groundBand >= fall) {
-        char height[32];
-        std::snprintf(height, sizeof height, "%.3g", fall);
-        throw InputError(origin + ": ground_band: must be below the outlet, " + height + " m above the ground");
-    }
+    job.groundBand = optionalNumber(doc, "ground_band", kDefaultGroundBandShare * outletHeight(job.scene), origin);
+    requireGroundBandBelowOutlet(job.scene, job.groundBand, origin + ": ground_band");
 
     // Blender's frame_start is simulation time 0 and video frame 0; frames after frame_end are ignored.
     const int frameStart = optionalInt(doc, "frame_start", 0, -1000000, origin);

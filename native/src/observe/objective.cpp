@@ -6,6 +6,8 @@
 
 #include <opencv2/core.hpp>
 
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <optional>
 
@@ -122,6 +124,16 @@ double normalizedSquaredError(const std::vector<double>& simulated, const std::v
 double outletHeight(const Scene& scene) {
     const std::optional<Outlet> outlet = findOutlet(scene);
     return outlet ? outlet->position.z() - outlet->ground : 0.0;
+}
+
+void requireGroundBandBelowOutlet(const Scene& scene, double band, const std::string& where) {
+    if (!std::isfinite(band) || band < 0) throw InputError(where + ": must be a finite number ≥ 0 (m)");
+    const double fall = outletHeight(scene);
+    if (fall > 0 && band >= fall) {
+        char height[32];
+        std::snprintf(height, sizeof height, "%.3g", fall);
+        throw InputError(where + ": must be below the outlet, " + height + " m above the ground");
+    }
 }
 
 cv::Mat1b excludeGroundBand(const cv::Mat1b& compared, const PinholeCamera& camera, const Scene& scene, double band) {

@@ -266,5 +266,8 @@ double totalObjective(const std::vector<ObjectiveTerm>& terms);
 cv::Mat1b excludeGroundBand(const cv::Mat1b& compared, const PinholeCamera& camera, const Scene& scene, double band);
 // The outlet's height above the ground (0 without a ground or a cup with a hole).
 double outletHeight(const Scene& scene);
+// Throws InputError naming `where` unless band is finite and ≥ 0 and, where the scene has an outlet,
+// lies below it.
+void requireGroundBandBelowOutlet(const Scene& scene, double band, const std::string& where);
 
 }  // namespace viscoscope
