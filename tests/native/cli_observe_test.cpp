@@ -54,6 +54,27 @@ protected:
         std::ofstream(file) << camera.dump();
     }
 
+    // A black clip extracted into dir_/ref: every reference mask empty.
+    bool extractEmptyReference() const {
+        const fs::path black = dir_ / "black.mp4";
+        if (std::system(("ffmpeg -v error -y -f lavfi -i color=c=black:size=96x72:rate=10 -frames:v 3 -c:v mpeg4 " +
+                         black.string()).c_str()) != 0)
+            return false;
+        return run("extract " + black.string() + " --out " + (dir_ / "ref").string() + " --background-frames 1").exitCode == 0;
+    }
+
+    // dir_/camera.json: 96x72, looking level along +y from kLevelDistance in front of the origin,
+    // kLevelEye above the ground (image rows grow downwards, with −z).
+    static constexpr double kLevelFocal = 400, kLevelCy = 35.5, kLevelEye = 0.02, kLevelDistance = 0.3;
+    void writeLevelCamera() const {
+        const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
+                                    {"K", {{kLevelFocal, 0, 47.5}, {0, kLevelFocal, kLevelCy}, {0, 0, 1}}},
+                                    {"distortion", {0, 0, 0, 0, 0}},
+                                    {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
+                                    {"t", {0, kLevelEye, kLevelDistance}}};
+        std::ofstream(dir_ / "camera.json") << camera.dump();
+    }
+
     // One triangle per frame, at depth `z` in front of (z > 0) or behind (z < 0) the camera.
     fs::path writeMeshFrames(const std::string& name, int frames, double z) const {
         const fs::path sim = dir_ / name;
@@ -115,11 +136,7 @@ TEST_F(CliObserve, ExtractThenScoreWithJsonProgress) {
 // cut off, with the solids of the scene `simulate` recorded beside the frames (or of --scene).
 // Against an empty reference, E by pixels is the silhouette's area, so the cut must lower it.
 TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {
-    const fs::path black = dir_ / "black.mp4";
-    ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i color=c=black:size=96x72:rate=10 -frames:v 3 -c:v mpeg4 " +
-                           black.string()).c_str()),
-              0);
-    ASSERT_EQ(run("extract " + black.string() + " --out " + (dir_ / "ref").string() + " --background-frames 1").exitCode, 0);
+    ASSERT_TRUE(extractEmptyReference());
     // A slab of liquid resting on the ground, seen level from 30 cm at 2 cm above the ground.
     const nlohmann::json scene{
         {"format", "viscoscope.scene"}, {"version", 1},
@@ -131,12 +148,7 @@ TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {
     std::ofstream(dir_ / "scene.json") << scene.dump();
     ASSERT_EQ(run("simulate " + (dir_ / "scene.json").string() + " --out " + (dir_ / "sim").string() +
                   " --progress none").exitCode, 0);
-    const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
-                                {"K", {{400, 0, 47.5}, {0, 400, 35.5}, {0, 0, 1}}},
-                                {"distortion", {0, 0, 0, 0, 0}},
-                                {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
-                                {"t", {0, 0.02, 0.3}}};
-    std::ofstream(dir_ / "camera.json") << camera.dump();
+    writeLevelCamera();
     auto score = [&](const std::string& name) {
         const CommandResult scored =
             run("score --comparison pixels --progress none --camera " + (dir_ / "camera.json").string() +
@@ -161,11 +173,7 @@ TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {
 // by pixels is the area of a wall of "liquid" from the ground to 4 cm, so the band (1 cm) must cut
 // it to the share of its rows above the band's top.
 TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
-    const fs::path black = dir_ / "black.mp4";
-    ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i color=c=black:size=96x72:rate=10 -frames:v 3 -c:v mpeg4 " +
-                           black.string()).c_str()),
-              0);
-    ASSERT_EQ(run("extract " + black.string() + " --out " + (dir_ / "ref").string() + " --background-frames 1").exitCode, 0);
+    ASSERT_TRUE(extractEmptyReference());
     const nlohmann::json scene{
         {"format", "viscoscope.scene"}, {"version", 1},
         {"domain", {{"min", {-0.05, -0.05, 0}}, {"max", {0.05, 0.05, 0.1}}, {"resolution", 16}}},
@@ -175,13 +183,7 @@ TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
         {"liquids", {{{"type", "cup_fill"}, {"cup", 1}, {"volume", 1e-6}}}},
         {"material", {{"density", 1000}, {"viscosity", 10.0}}}, {"fps", 30}, {"frames", 2}};
     std::ofstream(dir_ / "scene.json") << scene.dump();
-    const double f = 400, cy = 35.5, eye = 0.02, distance = 0.3;
-    const nlohmann::json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 72},
-                                {"K", {{f, 0, 47.5}, {0, f, cy}, {0, 0, 1}}},
-                                {"distortion", {0, 0, 0, 0, 0}},
-                                {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
-                                {"t", {0, eye, distance}}};
-    std::ofstream(dir_ / "camera.json") << camera.dump();
+    writeLevelCamera();
     const fs::path sim = dir_ / "sim";
     fs::create_directories(sim);
     for (int frame = 0; frame < 3; ++frame)
@@ -199,7 +201,7 @@ TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
     EXPECT_EQ(all.at("ground_band_m").get<double>(), 0.0);
     EXPECT_EQ(banded.at("ground_band_m").get<double>(), 0.01);
     // Image rows of the wall's top, of the band's top and of the ground (row centres at integers).
-    auto row = [&](double z) { return cy + f * (eye - z) / distance; };
+    auto row = [&](double z) { return kLevelCy + kLevelFocal * (kLevelEye - z) / kLevelDistance; };
     const double top = row(0.04), bandTop = row(0.01), ground = row(0.0);
     const double kept = std::floor(bandTop) - std::ceil(top) + 1, rows = std::floor(ground) - std::ceil(top) + 1;
     const double ratio = banded.at("E").get<double>() / all.at("E").get<double>();
