@@ -126,10 +126,8 @@ def one_row(args, eta, work):
         identify += ["--threads", args.threads]
     _, identify_s = run(identify, work / "identify.log")
     result = json.loads((work / "identify" / "result.json").read_text())
-    compared, _ = run([args.engine, "compare", "--reference", synth / "simulation", "--sim", work / "identify" / "fields"],
-                      work / "compare.log")
-    fields = json.loads(compared)
-    floor = json.loads(fields_at_true_eta(args, eta, step, work))
+    fields = hidden_field_errors(args, work, work / "identify" / "fields", work / "compare.log")
+    floor = fields_at_true_eta(args, eta, step, work)
     eta_star = result["viscosity"]["value"]
     # The budget rule's prediction of a full-fidelity generation (made at the switch) against them.
     predicted = [g["predicted_fine_generation_s"] for g in result["history"] if "predicted_fine_generation_s" in g]
@@ -144,8 +142,14 @@ def one_row(args, eta, work):
             "predicted_full_s": predicted[-1] if predicted else None, "full_s": full_seconds}
 
 
+def hidden_field_errors(args, work, sim, log):
+    """`compare`'s JSON for the fields in `sim` against the reference simulation's."""
+    compared, _ = run([args.engine, "compare", "--reference", work / "synth" / "simulation", "--sim", sim], log)
+    return json.loads(compared)
+
+
 def fields_at_true_eta(args, eta, step, work):
-    """`compare`'s JSON for the scene simulated at the true η on the identification's grid and seed."""
+    """hidden_field_errors for the scene simulated at the true η on the identification's grid and seed."""
     scene = json.loads(pathlib.Path(args.scene).read_text())
     scene["material"]["viscosity"] = eta
     scene["domain"]["resolution"] = args.resolution
@@ -155,9 +159,7 @@ def fields_at_true_eta(args, eta, step, work):
     path = work / "true_eta_scene.json"
     path.write_text(json.dumps(scene, indent=1))
     run([args.engine, "simulate", path, "--out", work / "true_eta", "--progress", "none"], work / "true_eta.log")
-    compared, _ = run([args.engine, "compare", "--reference", work / "synth" / "simulation", "--sim", work / "true_eta"],
-                      work / "compare_true_eta.log")
-    return compared
+    return hidden_field_errors(args, work, work / "true_eta", work / "compare_true_eta.log")
 
 
 def percent(x):
@@ -196,14 +198,15 @@ def main():
           f"seed {args.seed}, {args.frames} compared frames (clips longer above η = {args.slow_eta:g}), "
           f"{args.width}x{args.height} camera, {args.samples} spp; "
           f"work in {root}", flush=True)
-    header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'ε_p⁰ %':>6} {'ε_v⁰ %':>6} {'evals':>6} "
-              f"{'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")
+    header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'ε_p⁰ %':>6} {'ε_v⁰ %':>6} "
+              f"{'evals':>6} {'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")
     print(header, flush=True)
     try:
         for eta in etas:
             row = one_row(args, eta, root / f"eta_{eta:g}")
             print(f"{row['eta']:8g} {row['eta_star']:9.4g} {percent(row['eps_eta'])} {percent(row['eps_p'])} "
-                  f"{percent(row['eps_v'])} {percent(row['floor_p'])} {percent(row['floor_v'])} {row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
+                  f"{percent(row['eps_v'])} {percent(row['floor_p'])} {percent(row['floor_v'])} "
+                  f"{row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
                   f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['vertex']:9.4g}  "
                   f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]  {row['stop']}", flush=True)
             if row["predicted_full_s"] and row["full_s"]:
