@@ -13,9 +13,11 @@ For each true η, with the built engine only:
   5. the same at the true η: `viscoscope simulate` at the identification's resolution and seed, and
      `compare` again. That is the floor the identification's grid leaves (ε_p⁰, ε_v⁰): the paper's
      hidden fields were scored at the resolution they were identified at, these against a finer grid;
-and prints η_true, η*, ε_η = |η* − η|/η, ε_p, ε_v, ε_p⁰, ε_v⁰, the evaluations, the wall times (the
-search alone, and the whole `identify` with extraction and θ*'s fields), the profile parabola's vertex
-(not used as θ*) and the interval.
+  6. `compare` of θ*'s fields against the true η's on that same grid and seed (ε_p¹, ε_v¹): what the
+     error in η alone does to the hidden fields, as the paper scored them;
+and prints η_true, η*, ε_η = |η* − η|/η, ε_p, ε_v, ε_p⁰, ε_v⁰, ε_p¹, ε_v¹, the evaluations, the
+wall times (the search alone, and the whole `identify` with extraction and θ*'s fields), the profile
+parabola's vertex (not used as θ*) and the interval.
 
 The defaults are the issue's target (identification 48³, 60 frames) and take hours. The reference
 is 96³, where the sample cup's drain has nearly converged: at η = 1 the share drained by frame 8
@@ -126,8 +128,10 @@ def one_row(args, eta, work):
         identify += ["--threads", args.threads]
     _, identify_s = run(identify, work / "identify.log")
     result = json.loads((work / "identify" / "result.json").read_text())
-    fields = hidden_field_errors(args, work, work / "identify" / "fields", work / "compare.log")
+    identified = work / "identify" / "fields"
+    fields = hidden_field_errors(args, work / "synth" / "simulation", identified, work / "compare.log")
     floor = fields_at_true_eta(args, eta, step, work)
+    same_grid = hidden_field_errors(args, work / "true_eta", identified, work / "compare_same_grid.log")
     eta_star = result["viscosity"]["value"]
     # The budget rule's prediction of a full-fidelity generation (made at the switch) against them.
     predicted = [g["predicted_fine_generation_s"] for g in result["history"] if "predicted_fine_generation_s" in g]
@@ -135,6 +139,7 @@ def one_row(args, eta, work):
     return {"eta": eta, "eta_star": eta_star, "eps_eta": abs(eta_star - eta) / eta,
             "eps_p": fields["epsilon_p"], "eps_v": fields["epsilon_v"],
             "floor_p": floor["epsilon_p"], "floor_v": floor["epsilon_v"],
+            "same_grid_p": same_grid["epsilon_p"], "same_grid_v": same_grid["epsilon_v"],
             "evaluations": result["evaluations"], "identify_s": identify_s, "synth_s": synth_s,
             "search_s": result["timings"]["wall_s"], "stop": result["stop"],
             "vertex": result["viscosity"].get("profile_fit", {}).get("theta_min", math.nan),
@@ -142,9 +147,9 @@ def one_row(args, eta, work):
             "predicted_full_s": predicted[-1] if predicted else None, "full_s": full_seconds}
 
 
-def hidden_field_errors(args, work, sim, log):
-    """`compare`'s JSON for the fields in `sim` against the reference simulation's."""
-    compared, _ = run([args.engine, "compare", "--reference", work / "synth" / "simulation", "--sim", sim], log)
+def hidden_field_errors(args, reference, sim, log):
+    """`compare`'s JSON for the fields in `sim` against those in `reference`."""
+    compared, _ = run([args.engine, "compare", "--reference", reference, "--sim", sim], log)
     return json.loads(compared)
 
 
@@ -159,7 +164,8 @@ def fields_at_true_eta(args, eta, step, work):
     path = work / "true_eta_scene.json"
     path.write_text(json.dumps(scene, indent=1))
     run([args.engine, "simulate", path, "--out", work / "true_eta", "--progress", "none"], work / "true_eta.log")
-    return hidden_field_errors(args, work, work / "true_eta", work / "compare_true_eta.log")
+    return hidden_field_errors(args, work / "synth" / "simulation", work / "true_eta",
+                               work / "compare_true_eta.log")
 
 
 def percent(x):
@@ -199,6 +205,7 @@ def main():
           f"{args.width}x{args.height} camera, {args.samples} spp; "
           f"work in {root}", flush=True)
     header = (f"{'η_true':>8} {'η*':>9} {'ε_η %':>6} {'ε_p %':>6} {'ε_v %':>6} {'ε_p⁰ %':>6} {'ε_v⁰ %':>6} "
+              f"{'ε_p¹ %':>6} {'ε_v¹ %':>6} "
               f"{'evals':>6} {'search s':>8} {'identify s':>10} {'synth s':>8} {'vertex':>9}  interval  stop")
     print(header, flush=True)
     try:
@@ -206,6 +213,7 @@ def main():
             row = one_row(args, eta, root / f"eta_{eta:g}")
             print(f"{row['eta']:8g} {row['eta_star']:9.4g} {percent(row['eps_eta'])} {percent(row['eps_p'])} "
                   f"{percent(row['eps_v'])} {percent(row['floor_p'])} {percent(row['floor_v'])} "
+                  f"{percent(row['same_grid_p'])} {percent(row['same_grid_v'])} "
                   f"{row['evaluations']:6d} {row['search_s']:8.1f} {row['identify_s']:10.1f} "
                   f"{'reused' if row['synth_s'] is None else format(row['synth_s'], '.1f'):>8} {row['vertex']:9.4g}  "
                   f"[{row['interval'][0]:.3g}, {row['interval'][1]:.3g}]  {row['stop']}", flush=True)

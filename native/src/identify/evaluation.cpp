@@ -205,9 +205,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
     const auto setupStart = Clock::now();
     sim::Simulation simulation(scene);
     ev.simulationSeconds += seconds(setupStart, Clock::now());
-    std::optional<double> ground;
-    for (const Solid& solid : scene.solids)
-        if (const auto* g = std::get_if<GroundSolid>(&solid)) ground = g->height;
+    const std::optional<double> ground = groundHeight(scene);
     const bool writeFields = !fieldsDir.empty();
     if (writeFields) {
         fs::create_directories(fieldsDir);
