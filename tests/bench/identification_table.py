@@ -126,6 +126,9 @@ def one_row(args, eta, work):
                 "--no-plots"]
     if args.threads:
         identify += ["--threads", args.threads]
+    # identify resumes from a folder's checkpoint, even a finished run made by another build, which
+    # would print that run's numbers as this one's: every row searches afresh.
+    shutil.rmtree(work / "identify", ignore_errors=True)
     _, identify_s = run(identify, work / "identify.log")
     result = json.loads((work / "identify" / "result.json").read_text())
     identified = work / "identify" / "fields"
