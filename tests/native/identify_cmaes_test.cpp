@@ -157,4 +157,46 @@ TEST(CmaEs, RestartKeepsCountersAndConvergesFromTheNewMean) {
     EXPECT_THROW(es.restart(Eigen::Vector2d(0, 0), Eigen::Vector2d(0.1, 0)), std::invalid_argument);
 }
 
+// An injected point keeps its direction from the mean, at a Mahalanobis length of at most
+// √n + 2n/(n+2); one within that length is left as it is.
+TEST(CmaEs, InjectedPointsAreClippedToHansensLength) {
+    CmaEs es(Eigen::Vector2d(1, 2), Eigen::Vector2d(0.5, 2), 3);
+    const double limit = std::sqrt(2.0) + 1;
+    const auto mahalanobis = [&](const Eigen::VectorXd& x) {
+        return std::sqrt((x - es.mean()).cwiseQuotient(es.standardDeviations()).squaredNorm());
+    };
+    const Eigen::Vector2d near(1.2, 3);
+    EXPECT_EQ(es.injectable(near), near);
+    const Eigen::Vector2d far(4, -10);
+    const Eigen::VectorXd clipped = es.injectable(far);
+    EXPECT_NEAR(mahalanobis(clipped), limit, 1e-12);
+    const Eigen::VectorXd direction = (far - es.mean()).normalized();
+    EXPECT_NEAR((clipped - es.mean()).normalized().dot(direction), 1, 1e-12);
+}
+
 }  // namespace
+
+// The proposal a one-parameter identification injects: the vertex of the parabola, in 1/θ for a
+// viscosity, through the best point and its nearest neighbours.
+TEST(BracketedVertex, FindsAParabolasVertexFromItsBracket) {
+    using viscoscope::identify::bracketedVertex;
+    const auto parabolaInInverse = [](double theta) { return 0.3 + 50 * std::pow(1 / theta - 1 / 31.0, 2); };
+    std::vector<std::pair<double, double>> points;
+    for (double theta : {15.5, 40.4, 22.5, 29.2, 33.2, 60.0}) points.emplace_back(theta, parabolaInInverse(theta));
+    points.emplace_back(25.0, NAN);  // a failed evaluation is ignored
+    ASSERT_TRUE(bracketedVertex(points, true) && bracketedVertex(points, false));
+    EXPECT_NEAR(*bracketedVertex(points, true), 31.0, 1e-9);
+    // In ln θ the same three points give another vertex, still between 29.2 and 33.2.
+    const double inLog = *bracketedVertex(points, false);
+    EXPECT_GT(inLog, 29.2);
+    EXPECT_LT(inLog, 33.2);
+    EXPECT_GT(std::abs(inLog - 31.0), 1e-3);
+    // No bracket: the lowest point at an end of the evaluated range, or nothing finite.
+    EXPECT_FALSE(bracketedVertex({{10, 1}, {20, 2}, {30, 3}}, true));
+    EXPECT_FALSE(bracketedVertex({{10, 3}, {20, 2}, {30, 1}}, true));
+    EXPECT_FALSE(bracketedVertex({{10, NAN}, {20, INFINITY}}, true));
+    // A flat bracket (ties go to the first point listed): the midpoint in u.
+    const std::optional<double> flat = bracketedVertex({{20, 1}, {10, 1}, {40, 1}}, false);
+    ASSERT_TRUE(flat);
+    EXPECT_NEAR(*flat, 20.0, 1e-9);
+}

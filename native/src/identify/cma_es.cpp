@@ -126,6 +126,13 @@ void CmaEs::tell(const std::vector<Eigen::VectorXd>& candidates, const std::vect
     updateEigenDecomposition();
 }
 
+Eigen::VectorXd CmaEs::injectable(const Eigen::VectorXd& x) const {
+    const Eigen::VectorXd step = x - mean_;
+    const double length = (B_.transpose() * step).cwiseQuotient(D_).norm() / sigma_;  // ‖C^{-1/2} step‖ / σ
+    const double limit = std::sqrt(double(n_)) + 2.0 * n_ / (n_ + 2);
+    return length > limit ? Eigen::VectorXd(mean_ + step * (limit / length)) : x;
+}
+
 Eigen::VectorXd CmaEs::standardDeviations() const { return sigma_ * C_.diagonal().cwiseSqrt(); }
 
 nlohmann::json CmaEs::toJson() const {

@@ -48,6 +48,10 @@ public:
     // Starts the search again at `mean` with per-coordinate spreads (σ and C as in the constructor,
     // evolution paths zero), keeping the generation and evaluation counters and the random stream.
     void restart(const Eigen::VectorXd& mean, const Eigen::VectorXd& spreads);
+    // An outside point made fit to replace one of ask()'s candidates (Hansen 2011, "Injecting
+    // external solutions into CMA-ES", eq. 4): its step from the mean is shortened to a Mahalanobis
+    // length of at most √n + 2n/(n+2), so one far point cannot drag the mean or inflate σ.
+    Eigen::VectorXd injectable(const Eigen::VectorXd& x) const;
 
     int dimension() const { return n_; }
     int lambda() const { return lambda_; }
@@ -264,6 +268,11 @@ struct ProfileFit {
 };
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
                                      double range, bool inverse, nlohmann::json& info);
+// The vertex of the parabola through the lowest point (θ, E) and its nearest neighbours in θ on
+// either side (u = 1/θ when `inverse`, else ln θ, as for fitProfile): one step of successive
+// parabolic interpolation, the proposal a one-parameter search injects (see identification.cpp).
+// None when the lowest point has no neighbour on one side, or E is not finite there.
+std::optional<double> bracketedVertex(const std::vector<std::pair<double, double>>& points, bool inverse);
 
 // ---------------------------------------------------------------------------------------------
 // The search space the optimizer sees (see the top of this file), shared with benchmarks that run
