@@ -132,7 +132,7 @@ def one_row(args, eta, work):
     _, identify_s = run(identify, work / "identify.log")
     result = json.loads((work / "identify" / "result.json").read_text())
     identified = work / "identify" / "fields"
-    fields = hidden_field_errors(args, work / "synth" / "simulation", identified, work / "compare.log")
+    fields = hidden_field_errors(args, synth / "simulation", identified, work / "compare.log")
     floor = fields_at_true_eta(args, eta, step, work)
     same_grid = hidden_field_errors(args, work / "true_eta", identified, work / "compare_same_grid.log")
     eta_star = result["viscosity"]["value"]
