@@ -210,16 +210,44 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
         EXPECT_EQ(e.at("frames").get<int>(), isCoarse ? 6 : 10);
     }
     EXPECT_GT(coarse, 0);
-    // The first full-fidelity generation scores the coarse best among its samples.
+    // The first generation scans; the first full-fidelity generation scores the coarse best in
+    // place of its last sample; later ones score the vertex of the parabola through the full-
+    // fidelity points so far, or a point on the way to it from the CMA-ES mean (clipped).
     double coarseBestE = INFINITY, coarseBestEta = NAN;
-    bool scored = false;
     for (const json& e : result.document.at("evaluated"))
         if (e.at("fidelity") == "coarse" && e.at("E").get<double>() < coarseBestE)
             coarseBestE = e.at("E").get<double>(), coarseBestEta = e.at("theta")[0].get<double>();
-    for (const json& e : result.document.at("evaluated"))
-        scored |= e.at("generation").get<int>() == result.document.at("coarse_generations").get<int>() + 1 &&
-                  std::abs(e.at("theta")[0].get<double>() / coarseBestEta - 1) < 1e-12;
-    EXPECT_TRUE(scored) << "coarse best " << coarseBestEta;
+    const int firstFull = result.document.at("coarse_generations").get<int>() + 1;
+    const json& evaluated = result.document.at("evaluated");
+    const json& generations = result.document.at("history");
+    int restarts = 0, proposals = 0;
+    for (size_t k = 0; k < evaluated.size(); ++k) {
+        const json& e = evaluated[k];
+        const int g = e.at("generation").get<int>();
+        const std::string origin = e.at("origin");
+        const bool last = k + 1 == evaluated.size() || evaluated[k + 1].at("generation").get<int>() != g;
+        const double eta = e.at("theta")[0].get<double>();
+        if (g == 1) EXPECT_EQ(origin, "scan");
+        else if (g == firstFull && last) {
+            EXPECT_EQ(origin, "restart");
+            EXPECT_NEAR(eta / coarseBestEta, 1, 1e-12);
+            ++restarts;
+        } else if (origin == "parabola") {
+            EXPECT_TRUE(last && g > firstFull) << "generation " << g;
+            std::vector<std::pair<double, double>> before;
+            for (const json& p : evaluated)
+                if (p.at("fidelity") == "full" && p.at("generation").get<int>() < g)
+                    before.emplace_back(p.at("theta")[0].get<double>(), p.at("E").get<double>());
+            const std::optional<double> vertex = identify::bracketedVertex(before, true);
+            ASSERT_TRUE(vertex) << "generation " << g;
+            const double mean = generations[g - 2].at("mean_theta")[0].get<double>();
+            EXPECT_GE(eta, std::min(*vertex, mean) * (1 - 1e-9)) << "generation " << g;
+            EXPECT_LE(eta, std::max(*vertex, mean) * (1 + 1e-9)) << "generation " << g;
+            ++proposals;
+        } else EXPECT_EQ(origin, "sample") << "generation " << g;
+    }
+    EXPECT_EQ(restarts, 1);
+    EXPECT_GT(proposals, 0);
     EXPECT_LE(result.interval[0][0], result.theta[0]);
     EXPECT_GE(result.interval[0][1], result.theta[0]);
     // The alignment check scores θ* and 1.15 θ* on the grid moved by half a cell, and the interval

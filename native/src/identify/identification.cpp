@@ -565,14 +565,23 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         std::vector<Eigen::VectorXd> xs = es.ask();
         const bool scan = g == 0 && coarse && n == 1 && xs.size() > 1;
         if (scan) xs = scanPoints(bounds, static_cast<int>(xs.size()));
+        // Where each point came from, recorded with its evaluation: a CMA-ES sample, a scan point,
+        // or an injected restart point or parabolic proposal.
+        std::vector<std::string> origins(xs.size(), scan ? "scan" : "sample");
         // The first full-fidelity generation also scores the restart point, the coarse best, in
         // place of its last sample: with λ = 4 draws of spread ln 1.4, all four can miss the basin
         // the coarse phase found (η = 30: coarse best 28.6, full samples 14.1 / 36.8 / 20.5 / 19.5).
         // An injected mean is a zero step for CMA-ES's update (Hansen 2011, "Injecting external
         // solutions into CMA-ES"), so nothing else changes.
-        if (g == coarseEnd && coarseEnd > 0) xs.back() = es.mean();
-        else if (!coarse && n == 1)
-            if (const std::optional<Eigen::VectorXd> proposal = parabolicProposal()) xs.back() = es.injectable(*proposal);
+        if (g == coarseEnd && coarseEnd > 0) {
+            xs.back() = es.mean();
+            origins.back() = "restart";
+        } else if (!coarse && n == 1) {
+            if (const std::optional<Eigen::VectorXd> proposal = parabolicProposal()) {
+                xs.back() = es.injectable(*proposal);
+                origins.back() = "parabola";
+            }
+        }
         const bool stageFields = options.writeFields && !coarse;
         const fs::path staging = outDir / kFieldsStaging;
         fs::remove_all(staging);  // what a killed generation left
@@ -606,7 +615,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                    {"seconds", evals[k].seconds},
                    {"simulation_s", evals[k].simulationSeconds},
                    {"silhouette_s", evals[k].silhouetteSeconds},
-                   {"fields_s", evals[k].fieldsSeconds}};
+                   {"fields_s", evals[k].fieldsSeconds},
+                   {"origin", origins[k]}};
             if (!errors[k].empty()) e["error"] = errors[k];
             evaluated.push_back(e);
         }
@@ -905,7 +915,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         std::ofstream csv(outDir / "evaluations.csv.partial");
         csv << "generation,fidelity,resolution,frames";
         for (const ParameterSpec& p : job.parameters) csv << "," << p.name;
-        csv << ",E,seconds\n";
+        csv << ",E,seconds,origin\n";
         csv << std::setprecision(17);
         for (const json& e : evaluated) {
             csv << e.at("generation").get<int>() << "," << e.at("fidelity").get<std::string>() << ","
@@ -914,7 +924,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             csv << ",";
             if (e.at("E").is_null()) csv << "nan";
             else csv << e.at("E").get<double>();
-            csv << "," << e.at("seconds").get<double>() << "\n";
+            csv << "," << e.at("seconds").get<double>() << "," << e.value("origin", "") << "\n";  // older checkpoints have none
         }
     }
     fs::rename(outDir / "evaluations.csv.partial", outDir / "evaluations.csv");
