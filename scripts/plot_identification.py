@@ -66,6 +66,11 @@ def main(out_dir):
         if pts:
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "o", ms=4, alpha=0.75, color="C%d" % i,
                     label="%s: %d³, frames 0..%d" % (fidelity, runs[0]["resolution"], runs[0]["frames"]))
+    # The parabolic proposals the full-fidelity generations injected (see identification.cpp).
+    proposals = [(e["theta"][0], e["E"]) for e in evaluated if e.get("origin") == "parabola" and e["E"] is not None]
+    if proposals:
+        ax.plot([p[0] for p in proposals], [p[1] for p in proposals], "o", ms=8, mfc="none", color="C3",
+                label="parabolic proposals (%d)" % len(proposals))
     param = result["parameters"][name]
     lo, hi = param["interval"]
     ax.axvspan(lo, hi, color="C2", alpha=0.15, label="interval (%s)" % param["interval_method"].split(":")[0])
