@@ -109,40 +109,56 @@ TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
 
 // The liquid surface must lie where the liquid ends, whatever the grid: spheres reaching a fixed
 // fraction of a cell beyond it would draw a coarse simulation's streams and puddles wider than a
-// fine one's. Particles are seeded as Simulation seeds them (8 per cell, jittered in sub-cells)
-// into shapes of the sizes the sample cup shows: its stream (radius 2.4 cells at 48³, 3.2 at 64³),
-// the film on the ground, the edge of a film one or two cells thick (the front of a spreading
-// puddle), a drop, and large bodies. Without the inset the surface lies 0.46–0.54 cells out; with
-// one Gaussian pass before the inset it lay 0.67 cells inside a one-cell film's edge.
+// fine one's. Particles fill shapes of the sizes the sample cup shows: its stream (radius 2.4 cells at
+// 48³, 3.2 at 64³; 1.2–1.7 cells at 48³ by its particles' volume at η = 1), the film on the ground, the edge of a film one
+// or two cells thick (the front of a spreading puddle), a drop, and large bodies. They are placed
+// as Simulation seeds them (jittered in sub-cells, 8 or 27 per cell) and as they lie after flowing:
+// in the sample cup's stream their nearest neighbours are 0.28 cells away on average at 48³ and
+// 96³, against 0.32 as seeded and 0.27 for independent uniform points, which stand in for them.
+// Flowed particles leave wider gaps, and the edge of a one-cell film recedes 0.12 cells from them
+// (0.06 from seeded ones), so for them the test asks that the arrangement moves the surface by less
+// than 0.1 cells rather than that it lies within 0.1 cells of the edge.
+// Without the inset the surface lies 0.46–0.54 cells out; with one Gaussian pass before the inset it
+// lay 0.67 cells inside a one-cell film's edge.
 TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
     enum Shape { kColumn, kSlab, kBall, kFilmEdge };
     struct Case { const char* name; Shape shape; double size; };  // radius, or a slab's thickness, in cells
-    const Case cases[] = {{"stream 2.4", kColumn, 2.4}, {"stream 3.2", kColumn, 3.2}, {"column 8", kColumn, 8},
-                          {"film 1", kSlab, 1},         {"film 2", kSlab, 2},         {"film 3", kSlab, 3},
-                          {"slab 8", kSlab, 8},         {"drop 3", kBall, 3},         {"edge 1", kFilmEdge, 1},
-                          {"edge 2", kFilmEdge, 2}};
+    const Case cases[] = {{"stream 1.3", kColumn, 1.3}, {"stream 2.4", kColumn, 2.4}, {"stream 3.2", kColumn, 3.2},
+                          {"column 8", kColumn, 8},     {"film 1", kSlab, 1},         {"film 2", kSlab, 2},
+                          {"film 3", kSlab, 3},         {"slab 8", kSlab, 8},         {"drop 3", kBall, 3},
+                          {"edge 1", kFilmEdge, 1},     {"edge 2", kFilmEdge, 2}};
+    struct Arrangement { const char* name; int perAxis; bool flowed; };
+    const Arrangement arrangements[] = {{"seeded 8", 2, false}, {"seeded 27", 3, false}, {"flowed 8", 2, true}};
+    std::vector<double> seededReach;  // per case, with 8 seeded particles per cell
     const double dx = 0.004;
     std::mt19937 random(7);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
+    // The reach of one draw of particles varies by ±0.05 cells for thin shapes; four are averaged.
+    const int draws = 4, rays = 100;
+    for (const Arrangement& arrangement : arrangements)
     for (const Case& c : cases) {
+      const int perAxis = arrangement.perAxis, perCell = perAxis * perAxis * perAxis;
+      double sum = 0;
+      for (int draw = 0; draw < draws; ++draw) {
         std::vector<Eigen::Vector3d> particles;
         for (int i = -12; i < 12; ++i)
             for (int j = -12; j < 12; ++j)
                 for (int k = -12; k < 12; ++k)
-                    for (int s = 0; s < 8; ++s) {
-                        const Eigen::Vector3d sub(s % 2 + unit(random), (s / 2) % 2 + unit(random), s / 4 + unit(random));
-                        const Eigen::Vector3d x = Eigen::Vector3d(i, j, k) + sub / 2;  // in cells
+                    for (int s = 0; s < perCell; ++s) {
+                        const Eigen::Vector3d sub =
+                            arrangement.flowed ? Eigen::Vector3d(unit(random), unit(random), unit(random))
+                                               : (Eigen::Vector3d(s % perAxis, (s / perAxis) % perAxis, s / (perAxis * perAxis)) +
+                                                  Eigen::Vector3d(unit(random), unit(random), unit(random))) / perAxis;
+                        const Eigen::Vector3d x = Eigen::Vector3d(i, j, k) + sub;  // in cells
                         const double extent = c.shape == kColumn ? x.head<2>().norm()
                                               : c.shape == kBall     ? x.norm()
                                                                      : 2 * std::abs(x.z());
                         if (extent <= c.size && (c.shape != kFilmEdge || x.x() <= 0)) particles.push_back(x * dx);
                     }
-        const auto levelSet = surface::liquidLevelSet(particles, dx);
+        const auto levelSet = surface::liquidLevelSet(particles, surface::surfaceScale(dx, perCell));
         const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> phi(*levelSet);
         // The zero crossing along rays outwards from the shape's axis, plane or centre, found by bisection.
         const double boundary = c.shape == kSlab ? c.size / 2 : c.shape == kFilmEdge ? 6 : c.size;
-        double sum = 0;
-        const int rays = 200;
         for (int r = 0; r < rays; ++r) {
             const double a = 2 * M_PI * unit(random), cosB = 2 * unit(random) - 1, h = 12 * unit(random) - 6;
             const double sinB = std::sqrt(1 - cosB * cosB);
@@ -163,8 +179,11 @@ TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
             }
             sum += inside - boundary;
         }
-        const double reach = sum / rays;
-        std::printf("%-10s surface %+.3f cells beyond the liquid\n", c.name, reach);
-        EXPECT_LT(std::abs(reach), 0.1) << c.name;
+      }
+        const double reach = sum / (draws * rays);
+        std::printf("%-9s %-10s surface %+.3f cells beyond the liquid\n", arrangement.name, c.name, reach);
+        if (!arrangement.flowed) EXPECT_LT(std::abs(reach), 0.1) << arrangement.name << ", " << c.name;
+        if (perCell == 8 && !arrangement.flowed) seededReach.push_back(reach);
+        if (arrangement.flowed) EXPECT_LT(std::abs(reach - seededReach[&c - cases]), 0.1) << c.name;
     }
 }

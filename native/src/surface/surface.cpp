@@ -21,11 +21,13 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
 
 }  // namespace
 
-openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
+double surfaceScale(double cellSize, int particlesPerCell) { return 2 * cellSize / std::cbrt(particlesPerCell); }
+
+openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double scale,
                                        const SurfaceOptions& options) {
-    return sim::particleLevelSet(positions, options.particleRadius * cellSize, cellSize / options.voxelsPerCell,
+    return sim::particleLevelSet(positions, options.particleRadius * scale, scale / options.voxelsPerCell,
                                  Eigen::Vector3d::Zero(), /*smoothingPasses=*/ 0, sim::kDefaultBandHalfWidth,
-                                 options.inset * cellSize);
+                                 options.inset * scale);
 }
 
 void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids) {

@@ -20,11 +20,13 @@
 namespace viscoscope::surface {
 
 struct SurfaceOptions {
-    double voxelsPerCell = 2;      // surface resolution relative to the simulation grid
-    double particleRadius = 0.75;  // in simulation cells
-    // In simulation cells, how far the renormalized union of the spheres is moved inwards: with the
-    // spheres' radius this is a morphological closing, which fills the gaps between particles and
-    // leaves convex edges where the liquid ends. The spheres alone reach 0.46–0.54 cells beyond the
+    // Lengths are in units of the scale liquidLevelSet is given, the simulation cell at the default
+    // 8 particles per cell (see surfaceScale).
+    double voxelsPerCell = 2;      // surface resolution: voxels per unit
+    double particleRadius = 0.75;
+    // How far the renormalized union of the spheres is moved inwards: with the spheres' radius this
+    // is a morphological closing, which fills the gaps between particles and leaves convex edges
+    // where the liquid ends. The spheres alone reach 0.46–0.54 cells beyond the
     // liquid they fill, so a coarser grid would draw wider streams and puddles and bias an
     // identification across resolutions; with the inset the reach is −0.07…+0.05 cells for streams,
     // films, a film's edge and a drop (tests/native/surface_solids_test).
@@ -35,7 +37,12 @@ struct SurfaceOptions {
     double inset = 0.47;
 };
 
-openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double cellSize,
+// The unit of SurfaceOptions for a simulation's particles: twice their seeding spacing, which is the
+// cell at 8 per cell. The spheres must shrink with the spacing for the inset to keep the surface at
+// the liquid's edge: at 27 per cell, spheres sized to the cell would reach further out.
+double surfaceScale(double cellSize, int particlesPerCell);
+
+openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double scale,
                                        const SurfaceOptions& options = {});
 
 // Removes what lies inside the simulation's solids from a liquid level set, φ ← max(φ, −d_solid):
