@@ -58,8 +58,7 @@ void writeReference(const Scene& base, double eta, int resolution, int frames, c
     for (int frame = 1; frame <= frames; ++frame) {
         simulation.advanceFrame();
         if (frame % 3) continue;  // every third frame
-        const auto levelSet = surface::liquidLevelSet(
-            simulation.particles().position, surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell));
+        const auto levelSet = surface::liquidLevelSet(simulation);
         cv::Mat small;
         cv::resize(silhouetteFromLevelSet(*levelSet, fine), small, cv::Size(160, 120), 0, 0, cv::INTER_AREA);
         char name[32];

@@ -72,8 +72,7 @@ void writeReference(const fs::path& dir) {
     for (int frame = 1; frame <= 10; ++frame) {
         simulation.advanceFrame();
         if (frame % 2) continue;
-        const auto levelSet = surface::liquidLevelSet(
-            simulation.particles().position, surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell));
+        const auto levelSet = surface::liquidLevelSet(simulation);
         const cv::Mat1b big = silhouetteFromLevelSet(*levelSet, fine);
         cv::Mat small;
         cv::resize(big, small, cv::Size(96, 64), 0, 0, cv::INTER_AREA);

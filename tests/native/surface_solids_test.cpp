@@ -91,7 +91,7 @@ TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
     const sim::Simulation simulation(parseScene(doc, "clip"));
     surface::SurfaceOptions reachingBelow;  // without the inset the spheres surely reach below the ground
     reachingBelow.inset = 0;
-    const auto levelSet = surface::liquidLevelSet(simulation.particles().position, simulation.grid().dx, reachingBelow);
+    const auto levelSet = surface::liquidLevelSet(simulation, reachingBelow);
     auto insideVoxels = [&](bool below) {
         int count = 0;
         for (auto v = levelSet->cbeginValueOn(); v; ++v) {

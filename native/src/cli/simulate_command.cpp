@@ -30,8 +30,7 @@ void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& 
     if (scene.outputs.particles)
         surface::writeParticles(dir / frameName("particles", f, "bin"), simulation.particles());
     if (!scene.outputs.vdb && !scene.outputs.mesh) return;
-    auto levelSet = surface::liquidLevelSet(
-        simulation.particles().position, surface::surfaceScale(simulation.grid().dx, scene.solver.particlesPerCell));
+    auto levelSet = surface::liquidLevelSet(simulation);
     if (scene.outputs.vdb) surface::writeFrameVdb(dir / frameName("frame", f, "vdb"), simulation, levelSet);
     if (scene.outputs.mesh) {
         std::vector<openvdb::Vec3s> points;

@@ -226,8 +226,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
             ev.frameSeconds.push_back(seconds(simStart, lap));
             continue;
         }
-        const auto levelSet = surface::liquidLevelSet(
-            simulation.particles().position, surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell));
+        const auto levelSet = surface::liquidLevelSet(simulation);
         const auto built = Clock::now();
         (compared ? ev.silhouetteSeconds : ev.fieldsSeconds) += seconds(lap, built);
         lap = built;

@@ -30,6 +30,11 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
                                  options.inset * scale);
 }
 
+openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation, const SurfaceOptions& options) {
+    return liquidLevelSet(simulation.particles().position,
+                          surfaceScale(simulation.grid().dx, simulation.scene().solver.particlesPerCell), options);
+}
+
 void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids) {
     const openvdb::math::Transform& transform = levelSet.transform();
     for (auto voxel = levelSet.tree().beginValueOn(); voxel; ++voxel) {

@@ -44,6 +44,8 @@ double surfaceScale(double cellSize, int particlesPerCell);
 
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double scale,
                                        const SurfaceOptions& options = {});
+// The surface of a simulation's liquid: its particles at surfaceScale of its grid and seeding.
+openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation, const SurfaceOptions& options = {});
 
 // Removes what lies inside the simulation's solids from a liquid level set, φ ← max(φ, −d_solid):
 // the particle spheres reach a fraction of a cell below the ground and into walls, where no
