@@ -26,10 +26,11 @@ struct SurfaceOptions {
     double particleRadius = 0.75;
     // How far the renormalized union of the spheres is moved inwards: with the spheres' radius this
     // is a morphological closing, which fills the gaps between particles and leaves convex edges
-    // where the liquid ends. The spheres alone reach 0.46–0.54 cells beyond the
-    // liquid they fill, so a coarser grid would draw wider streams and puddles and bias an
-    // identification across resolutions; with the inset the reach is −0.07…+0.05 cells for streams,
-    // films, a film's edge and a drop (tests/native/surface_solids_test).
+    // where the liquid ends. The spheres alone reach 0.46–0.54 cells beyond the liquid they fill, so
+    // a coarser grid would draw wider streams and puddles and bias an identification across
+    // resolutions; with the inset the reach is −0.07…+0.05 cells for streams, films, a film's edge and
+    // a drop of seeded particles, and up to 0.06 cells less once they have flowed
+    // (tests/native/surface_solids_test).
     // Not smoothed: Gaussian passes move curved surfaces inwards as curvature flow does, and the
     // edge of a film one cell thick, like the front of a spreading puddle, receded 0.67 cells. The
     // sample cup's puddle at η = 1 then covered an area of radius 74.4 / 77.6 mm at 48³ / 64³ where
