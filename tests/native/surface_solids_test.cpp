@@ -161,8 +161,8 @@ TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
         const double boundary = c.shape == kSlab ? c.size / 2 : c.shape == kFilmEdge ? 6 : c.size;
         double sum = 0;
         int holes = 0;
+        const int perCell = arrangement.perAxis * arrangement.perAxis * arrangement.perAxis;
         for (int draw = 0; draw < draws; ++draw) {
-            const int perCell = arrangement.perAxis * arrangement.perAxis * arrangement.perAxis;
             const auto levelSet = surface::liquidLevelSet(fill(c, arrangement), surface::surfaceScale(dx, perCell));
             const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> phi(*levelSet);
             for (int r = 0; r < rays; ++r) {
@@ -189,7 +189,8 @@ TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
                 sum += inside - boundary;
             }
         }
-        EXPECT_LE(holes, draws * rays / 100) << arrangement.name << ", " << c.name;
+        // Seeded particles leave none, as the test has always required.
+        EXPECT_LE(holes, arrangement.flowed ? draws * rays / 100 : 0) << arrangement.name << ", " << c.name;
         const double mean = sum / (draws * rays - holes);
         std::printf("%-9s %-10s surface %+.3f cells beyond the liquid; rays starting in a hole: %d\n",
                     arrangement.name, c.name, mean, holes);
