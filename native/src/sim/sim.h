@@ -152,6 +152,8 @@ private:
     void computeFractions();
     void extrapolateVelocity(int layers);
     double velocityComponentAt(int axis, const Vec3& x, Vec3* gradient) const;
+    template <bool kGradient>
+    double interpolateVelocity(int axis, const Vec3& x, Vec3* gradient) const;
     void applyBodyForces(double dt);
     void applySurfaceTension(double dt);
     void updateViscosity(const StokesProblem& problem);
@@ -167,6 +169,7 @@ private:
     StokesState state_;
     VolumeFractions fractions_;
     Field liquidPhi_;                 // signed distance to the liquid surface at cell centres
+    std::optional<std::vector<Vec3>> fractionsPositions_;  // the particles fractions_ and liquidPhi_ are of
     std::array<std::vector<char>, 3> validFace_;  // faces whose velocity came from particles or the solve
     Field laplacePressure_;           // (1 − W) σκ at cells near the surface, this step's
     Field cellViscosity_;

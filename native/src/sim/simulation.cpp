@@ -93,13 +93,18 @@ double faceOpenArea(const SolidField& solids, const Vec3& centre, double centreD
 // Visits the samples of `lattice` within `margin` cells of the cell box [lo, hi] (one more along a
 // staggered axis). Outside the active box no control volume holds liquid, so per-step passes that
 // only concern liquid stay in it instead of sweeping the whole domain.
+// Layers of k run in parallel when `parallel` is set, for visits that write only their own sample.
 template <class Visit>
-void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin, Visit&& visit) {
+void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin, Visit&& visit,
+                    bool parallel = false) {
     const Vec3i from = (lo - Vec3i::Constant(margin)).cwiseMax(0);
     const Vec3i to = (hi + Vec3i::Constant(margin + 1)).cwiseMin(lattice.size - Vec3i::Ones());
-    for (int k = from[2]; k <= to[2]; ++k)
+    const auto layer = [&](int k) {
         for (int j = from[1]; j <= to[1]; ++j)
             for (int i = from[0]; i <= to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
+    };
+    if (parallel) tbb::parallel_for(from[2], to[2] + 1, layer);
+    else for (int k = from[2]; k <= to[2]; ++k) layer(k);
 }
 
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
@@ -416,9 +421,10 @@ void Simulation::emit(double dt) {
 }
 
 // APIC particle → grid transfer (Jiang et al. 2015) with trilinear weights on each face lattice.
+// The three lattices are independent, so each is one task; within one, particles add in order.
 void Simulation::transferToGrid() {
     const size_t n = particles_.position.size();
-    for (int a = 0; a < 3; ++a) {
+    tbb::parallel_for(0, 3, [&](int a) {
         Field& u = state_.velocity[a];
         std::vector<double> weight(u.values.size(), 0.0);
         std::fill(u.values.begin(), u.values.end(), 0.0);
@@ -436,7 +442,7 @@ void Simulation::transferToGrid() {
             validFace_[a][f] = weight[f] > 1e-12 && !fractions_.solidFace[a][f];
             u[f] = validFace_[a][f] ? u[f] / weight[f] : 0.0;
         }
-    }
+    });
 }
 
 // The mirror images, across the nearest wall, of the particles within `reach` of a solid: the liquid
@@ -477,6 +483,9 @@ std::vector<Vec3> Simulation::wallImages(double reach) const {
 // φ(x) = |x − x̄(x)| − r, with x̄ a kernel-weighted mean of nearby particles. Unlike a union of
 // spheres this gives flat surfaces where the particles lie flat, and no gaps inside the bulk.
 void Simulation::computeFractions() {
+    // The particles are their only input, and a frame's last fractions are the next step's first.
+    if (fractionsPositions_ && particles_.position == *fractionsPositions_) return;
+    fractionsPositions_ = particles_.position;
     const Lattice& cells = liquidPhi_.lattice;
     const double dx = grid_.dx, radius = kParticleRadius * dx, reach = kKernelRadius * dx;
     std::vector<double> kernelSum(cells.count(), 0.0);
@@ -489,14 +498,34 @@ void Simulation::computeFractions() {
     // cells across its radius; +0.86 % with the images). The particles' wall images therefore count
     // too: cut cells at walls read as full of liquid, and the non-solid fraction removes the part
     // inside the wall.
-    auto splat = [&](const Vec3& x) {
-        if (!x.allFinite()) return;  // advanceFrame reports a blow-up; never index with it
-        const Vec3i base = ((x - grid_.origin) / dx).array().floor().cast<int>();
+    // The splat runs in slabs of cell layers, each over the points that reach it in their order
+    // (particles, then images), so every cell sums in the same order at any thread count.
+    const std::vector<Vec3> images = wallImages(reach);
+    const size_t particleCount = particles_.position.size();
+    const auto point = [&](size_t p) -> const Vec3& {
+        return p < particleCount ? particles_.position[p] : images[p - particleCount];
+    };
+    const auto baseCell = [&](const Vec3& x) -> Vec3i { return ((x - grid_.origin) / dx).array().floor().cast<int>(); };
+    constexpr int kSlab = 4;
+    const int slabs = (cells.size[2] + kSlab - 1) / kSlab;
+    std::vector<std::vector<size_t>> reaching(slabs);
+    for (size_t p = 0; p < particleCount + images.size(); ++p) {
+        if (!point(p).allFinite()) continue;  // advanceFrame reports a blow-up; never index with it
+        const int k = baseCell(point(p))[2];
+        for (int dk = -span; dk <= span; ++dk) {
+            Vec3i c(0, 0, k + dk);
+            if (!cells.resolve(c)) continue;
+            std::vector<size_t>& list = reaching[c[2] / kSlab];
+            if (list.empty() || list.back() != p) list.push_back(p);
+        }
+    }
+    auto splat = [&](const Vec3& x, int zLo, int zHi) {
+        const Vec3i base = baseCell(x);
         for (int dk = -span; dk <= span; ++dk)
             for (int dj = -span; dj <= span; ++dj)
                 for (int di = -span; di <= span; ++di) {
                     Vec3i c = base + Vec3i(di, dj, dk);
-                    if (!cells.resolve(c)) continue;
+                    if (!cells.resolve(c) || c[2] < zLo || c[2] > zHi) continue;
                     Vec3 offset = x - grid_.position(kCellCentre, base + Vec3i(di, dj, dk));
                     const double s2 = offset.squaredNorm() / (reach * reach);
                     if (s2 >= 1) continue;
@@ -507,8 +536,9 @@ void Simulation::computeFractions() {
                     weightedPosition[idx] += k * offset;
                 }
     };
-    for (const Vec3& x : particles_.position) splat(x);
-    for (const Vec3& x : wallImages(reach)) splat(x);
+    tbb::parallel_for(0, slabs, [&](int slab) {
+        for (const size_t p : reaching[slab]) splat(point(p), slab * kSlab, slab * kSlab + kSlab - 1);
+    });
     for (int c = 0; c < cells.count(); ++c)
         liquidPhi_[c] = kernelSum[c] > 0 ? std::min((weightedPosition[c] / kernelSum[c]).norm() - radius, 3 * dx) : 3 * dx;
 
@@ -600,10 +630,12 @@ void Simulation::extrapolateVelocity(int layers) {
         Field& u = state_.velocity[a];
         std::vector<char>& valid = validFace_[a];
         // Only faces near the liquid are ever read (by particles and the solve): stay in its box.
-        std::vector<std::pair<int, double>> filled;
+        // A layer's new values wait in `filled` until the whole layer has read its neighbours.
+        std::vector<double> filled(u.values.size());
+        std::vector<char> isFilled(u.values.size());
         for (int layer = 0; layer < layers; ++layer) {
-            filled.clear();
             forEachNearBox(u.lattice, activeLo_, activeHi_, layers, [&](int f, const Vec3i& ijk) {
+                isFilled[f] = 0;
                 if (valid[f] || fractions_.solidFace[a][f]) return;
                 double sum = 0;
                 int count = 0;
@@ -613,12 +645,16 @@ void Simulation::extrapolateVelocity(int layers) {
                             sum += u[nb];
                             ++count;
                         }
-                if (count) filled.emplace_back(f, sum / count);
-            });
-            for (const auto& [f, value] : filled) {
-                u[f] = value;
+                if (count) {
+                    filled[f] = sum / count;
+                    isFilled[f] = 1;
+                }
+            }, true);
+            forEachNearBox(u.lattice, activeLo_, activeHi_, layers, [&](int f, const Vec3i&) {
+                if (!isFilled[f]) return;
+                u[f] = filled[f];
                 valid[f] = 1;
-            }
+            }, true);
         }
     }
 }
@@ -751,9 +787,15 @@ void Simulation::transferToParticles() {
 // ghosts there as well (least-squares through the liquid neighbours) carried 7 % less than the face
 // fluxes through the sample cup's hole at 48³ and 64³, against 3 % less with the zero.
 double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) const {
+    // Two instances, so that interpolating without the gradient computes none.
+    return gradient ? interpolateVelocity<true>(a, x, gradient) : interpolateVelocity<false>(a, x, nullptr);
+}
+
+template <bool kGradient>
+double Simulation::interpolateVelocity(int a, const Vec3& x, Vec3* gradient) const {
     const Field& u = state_.velocity[a];
     double value = 0;
-    if (gradient) gradient->setZero();
+    if constexpr (kGradient) gradient->setZero();
     forEachStencilSampleBeyond(grid_, u.lattice, x, [&](int f, double w, const Vec3& dw, const Vec3i* beyond) {
         double sample = u[f];
         if (beyond && !fractions_.solidFace[a][f])
@@ -761,7 +803,7 @@ double Simulation::velocityComponentAt(int a, const Vec3& x, Vec3* gradient) con
                                      solids_->distance(grid_.position(kFace[a], *beyond)),
                                      scene_.material.slipLength, grid_.dx);
         value += w * sample;
-        if (gradient) *gradient += dw * sample;
+        if constexpr (kGradient) *gradient += dw * sample;
     });
     return value;
 }
@@ -777,6 +819,7 @@ Vec3 Simulation::velocityAt(const Vec3& x) const {
 // Ralston's third-order Runge–Kutta through the grid velocity, then out of solids.
 void Simulation::advectParticles(double dt) {
     const Vec3 lo = grid_.origin, extent = grid_.extent();
+    const Lattice& cells = liquidPhi_.lattice;
     tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
         Vec3 x = particles_.position[p];
         const Vec3 k1 = velocityAt(x);
@@ -784,7 +827,11 @@ void Simulation::advectParticles(double dt) {
         const Vec3 k3 = velocityAt(x + 0.75 * dt * k2);
         x += dt * (2.0 / 9.0 * k1 + 1.0 / 3.0 * k2 + 4.0 / 9.0 * k3);
         const double margin = kSolidMargin * grid_.dx;
-        for (int iter = 0; iter < 3; ++iter) {
+        // Distances are 1-Lipschitz: the cell centre's clears most particles without a query.
+        const Vec3i c = ((x - lo) / grid_.dx).array().floor().cast<int>();
+        const bool inGrid = (c.array() >= 0).all() && (c.array() < cells.size.array()).all();
+        const bool clear = inGrid && cellSolidDistance_[cells.index(c[0], c[1], c[2])] - grid_.dx >= margin;
+        for (int iter = 0; iter < 3 && !clear; ++iter) {
             const double d = solids_->distance(x);
             if (d >= margin) break;
             x += (margin - d) * solids_->normal(x);
