@@ -93,18 +93,19 @@ double faceOpenArea(const SolidField& solids, const Vec3& centre, double centreD
 // Visits the samples of `lattice` within `margin` cells of the cell box [lo, hi] (one more along a
 // staggered axis). Outside the active box no control volume holds liquid, so per-step passes that
 // only concern liquid stay in it instead of sweeping the whole domain.
-// Layers of k run in parallel when `parallel` is set, for visits that write only their own sample.
+struct SampleBox {
+    Vec3i from, to;  // inclusive
+    bool contains(const Vec3i& c) const { return (c.array() >= from.array()).all() && (c.array() <= to.array()).all(); }
+};
+SampleBox nearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin) {
+    return {(lo - Vec3i::Constant(margin)).cwiseMax(0), (hi + Vec3i::Constant(margin + 1)).cwiseMin(lattice.size - Vec3i::Ones())};
+}
 template <class Visit>
-void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin, Visit&& visit,
-                    bool parallel = false) {
-    const Vec3i from = (lo - Vec3i::Constant(margin)).cwiseMax(0);
-    const Vec3i to = (hi + Vec3i::Constant(margin + 1)).cwiseMin(lattice.size - Vec3i::Ones());
-    const auto layer = [&](int k) {
-        for (int j = from[1]; j <= to[1]; ++j)
-            for (int i = from[0]; i <= to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
-    };
-    if (parallel) tbb::parallel_for(from[2], to[2] + 1, layer);
-    else for (int k = from[2]; k <= to[2]; ++k) layer(k);
+void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin, Visit&& visit) {
+    const SampleBox box = nearBox(lattice, lo, hi, margin);
+    for (int k = box.from[2]; k <= box.to[2]; ++k)
+        for (int j = box.from[1]; j <= box.to[1]; ++j)
+            for (int i = box.from[0]; i <= box.to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
 }
 
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
@@ -625,36 +626,51 @@ void Simulation::computeFractions() {
 }
 
 // Fills faces without a valid velocity with the mean of valid neighbours, one layer per pass.
+// A layer can only fill neighbours of the faces valid before it, so each pass visits those alone
+// (the next pass: the neighbours of the faces the last one filled), not the whole box around the
+// liquid, which is mostly air. A face's mean is over its neighbours in a fixed order either way.
 void Simulation::extrapolateVelocity(int layers) {
     for (int a = 0; a < 3; ++a) {
         Field& u = state_.velocity[a];
+        const Lattice& lattice = u.lattice;
         std::vector<char>& valid = validFace_[a];
         // Only faces near the liquid are ever read (by particles and the solve): stay in its box.
-        // A layer's new values wait in `filled` until the whole layer has read its neighbours.
-        std::vector<double> filled(u.values.size());
-        std::vector<char> isFilled(u.values.size());
+        const SampleBox box = nearBox(lattice, activeLo_, activeHi_, layers);
+        std::vector<char> queued(lattice.count(), 0);
+        std::vector<int> candidates;
+        const auto queueNeighbours = [&](int f) {
+            const Vec3i ijk = lattice.coords(f);
+            for (int b = 0; b < 3; ++b)
+                for (int d : {-1, 1})
+                    if (const int nb = lattice.neighbour(ijk, b, d);
+                        nb >= 0 && !queued[nb] && !valid[nb] && !fractions_.solidFace[a][nb] && box.contains(lattice.coords(nb))) {
+                        queued[nb] = 1;
+                        candidates.push_back(nb);
+                    }
+        };
+        for (int f = 0; f < lattice.count(); ++f)
+            if (valid[f]) queueNeighbours(f);
+        std::vector<std::pair<int, double>> filled;
         for (int layer = 0; layer < layers; ++layer) {
-            forEachNearBox(u.lattice, activeLo_, activeHi_, layers, [&](int f, const Vec3i& ijk) {
-                isFilled[f] = 0;
-                if (valid[f] || fractions_.solidFace[a][f]) return;
+            filled.clear();
+            for (const int f : candidates) {
+                const Vec3i ijk = lattice.coords(f);
                 double sum = 0;
                 int count = 0;
                 for (int b = 0; b < 3; ++b)
                     for (int d : {-1, 1})
-                        if (const int nb = u.lattice.neighbour(ijk, b, d); nb >= 0 && valid[nb]) {
+                        if (const int nb = lattice.neighbour(ijk, b, d); nb >= 0 && valid[nb]) {
                             sum += u[nb];
                             ++count;
                         }
-                if (count) {
-                    filled[f] = sum / count;
-                    isFilled[f] = 1;
-                }
-            }, true);
-            forEachNearBox(u.lattice, activeLo_, activeHi_, layers, [&](int f, const Vec3i&) {
-                if (!isFilled[f]) return;
-                u[f] = filled[f];
+                filled.emplace_back(f, sum / count);  // a candidate has a valid neighbour
+            }
+            for (const auto& [f, value] : filled) {
+                u[f] = value;
                 valid[f] = 1;
-            }, true);
+            }
+            candidates.clear();
+            for (const auto& [f, value] : filled) queueNeighbours(f);
         }
     }
 }
