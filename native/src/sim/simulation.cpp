@@ -90,7 +90,7 @@ double faceOpenArea(const SolidField& solids, const Vec3& centre, double centreD
     return open / (kSamples * kSamples);
 }
 
-// Visits the samples of `lattice` within `margin` cells of the cell box [lo, hi] (one more along a
+// The samples of `lattice` within `margin` cells of the cell box [lo, hi] (one more along a
 // staggered axis). Outside the active box no control volume holds liquid, so per-step passes that
 // only concern liquid stay in it instead of sweeping the whole domain.
 struct SampleBox {
@@ -100,6 +100,7 @@ struct SampleBox {
 SampleBox nearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin) {
     return {(lo - Vec3i::Constant(margin)).cwiseMax(0), (hi + Vec3i::Constant(margin + 1)).cwiseMin(lattice.size - Vec3i::Ones())};
 }
+// Visits those samples, k slowest.
 template <class Visit>
 void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, int margin, Visit&& visit) {
     const SampleBox box = nearBox(lattice, lo, hi, margin);
