@@ -109,6 +109,15 @@ void forEachNearBox(const Lattice& lattice, const Vec3i& lo, const Vec3i& hi, in
             for (int i = box.from[0]; i <= box.to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
 }
 
+// Whether x is surely at least `clearance` from every solid, from its cell centre's distance alone:
+// distances are 1-Lipschitz, so this spares most particles a query of the solids.
+bool surelyClearOfSolids(const Grid& grid, const Lattice& cells, const std::vector<double>& cellSolidDistance,
+                         const Vec3& x, double clearance) {
+    const Vec3i c = ((x - grid.origin) / grid.dx).array().floor().cast<int>();
+    const bool inGrid = (c.array() >= 0).all() && (c.array() < cells.size.array()).all();
+    return inGrid && cellSolidDistance[cells.index(c[0], c[1], c[2])] - grid.dx >= clearance;
+}
+
 bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, const Vec3& x) {
     if (const auto* box = std::get_if<LiquidBox>(&source))
         return (x.array() >= box->min.array()).all() && (x.array() <= box->max.array()).all();
@@ -466,9 +475,7 @@ std::vector<Vec3> Simulation::wallImages(double reach) const {
     tbb::parallel_for(size_t(0), particles_.position.size(), [&](size_t p) {
         const Vec3& x = particles_.position[p];
         if (!x.allFinite()) return;
-        // Distances are 1-Lipschitz: the cell centre's rules out most particles without a query.
-        Vec3i c = ((x - grid_.origin) / dx).array().floor().cast<int>();
-        if (cells.resolve(c) && cellSolidDistance_[cells.index(c[0], c[1], c[2])] - dx >= reach) return;
+        if (surelyClearOfSolids(grid_, cells, cellSolidDistance_, x, reach)) return;
         const double d = solids_->distance(x);
         if (d >= reach) return;
         const Vec3 n = solids_->normal(x);
@@ -844,10 +851,7 @@ void Simulation::advectParticles(double dt) {
         const Vec3 k3 = velocityAt(x + 0.75 * dt * k2);
         x += dt * (2.0 / 9.0 * k1 + 1.0 / 3.0 * k2 + 4.0 / 9.0 * k3);
         const double margin = kSolidMargin * grid_.dx;
-        // Distances are 1-Lipschitz: the cell centre's clears most particles without a query.
-        const Vec3i c = ((x - lo) / grid_.dx).array().floor().cast<int>();
-        const bool inGrid = (c.array() >= 0).all() && (c.array() < cells.size.array()).all();
-        const bool clear = inGrid && cellSolidDistance_[cells.index(c[0], c[1], c[2])] - grid_.dx >= margin;
+        const bool clear = surelyClearOfSolids(grid_, cells, cellSolidDistance_, x, margin);
         for (int iter = 0; iter < 3 && !clear; ++iter) {
             const double d = solids_->distance(x);
             if (d >= margin) break;
