@@ -23,7 +23,7 @@ import tempfile
 import numpy as np
 import pyopenvdb
 
-from viscosity_floor import read_particles, simulate  # beside this script
+from viscosity_floor import read_particles, scene_variant, simulate  # beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 SLAB_CENTRES = [0.03, 0.045, 0.06, 0.075, 0.09]  # m above the ground; the cup's bottom is at 0.10
@@ -90,15 +90,9 @@ def main():
     measured = {}
     with tempfile.TemporaryDirectory(prefix="particle_density_") as tmp:
         for resolution, per_cell, seed in runs:
-            scene = json.loads(json.dumps(base))
-            scene["domain"]["resolution"] = resolution
-            scene["material"]["viscosity"] = args.viscosity
-            scene["frames"], scene["seed"] = args.frames, seed
-            scene.setdefault("solver", {})["particles_per_cell"] = per_cell
-            scene["output"] = {"particles": True, "vdb": True, "mesh": False}
+            scene, cell = scene_variant(base, resolution, args.viscosity, args.frames, seed, per_cell, vdb=True)
             out = simulate(args.engine, scene, pathlib.Path(tmp) / f"{resolution}_{per_cell}",
                            f"{resolution} cells, {per_cell} particles per cell")
-            cell = max(hi - lo for lo, hi in zip(scene["domain"]["min"], scene["domain"]["max"])) / resolution
             measured[resolution, per_cell] = {
                 f: (particle_areas(out / f"particles_{f:05d}.bin", cell ** 3 / per_cell),
                     surface_areas(out / f"frame_{f:05d}.vdb")) for f in frames}

@@ -21,7 +21,7 @@ import tempfile
 
 import numpy as np
 
-from viscosity_floor import read_particles, simulate  # beside this script
+from viscosity_floor import read_particles, scene_variant, simulate  # beside this script
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 AXIS_RADIUS = 0.01  # m: the tip is looked for this close to the cup's axis
@@ -65,16 +65,10 @@ def main():
             print(f"surface tension {surface_tension:g} N/m")
             peer = None
             for resolution, per_cell, seed in runs:
-                scene = json.loads(json.dumps(base))
-                scene["domain"]["resolution"] = resolution
-                scene["material"]["viscosity"] = args.viscosity
-                scene["material"]["surface_tension"] = surface_tension
-                scene["frames"], scene["seed"] = args.frames, seed
-                scene.setdefault("solver", {})["particles_per_cell"] = per_cell
-                scene["output"] = {"particles": True, "vdb": False, "mesh": False}
+                scene, cell = scene_variant(base, resolution, args.viscosity, args.frames, seed, per_cell,
+                                            surface_tension)
                 what = f"{resolution} cells, {per_cell} per cell, surface tension {surface_tension:g}"
                 out = simulate(args.engine, scene, pathlib.Path(tmp) / f"{resolution}_{per_cell}_{surface_tension:g}", what)
-                cell = max(hi - lo for lo, hi in zip(scene["domain"]["min"], scene["domain"]["max"])) / resolution
                 tips, below = descent(out, args.frames, cup, cell ** 3 / per_cell)
                 if peer is None:
                     peer = tips, below

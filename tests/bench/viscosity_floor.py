@@ -40,13 +40,25 @@ def simulate(engine, scene, work, what):
     return work / "out"
 
 
-def drained_fraction(engine, scene, resolution, eta, frames, seed):
-    scene = json.loads(json.dumps(scene))
+def scene_variant(base, resolution, viscosity, frames, seed, particles_per_cell=None, surface_tension=None,
+                  vdb=False):
+    """A copy of the scene `base` on another grid, seeding, liquid and clip, writing its particles (and
+    surfaces with `vdb`); also its cell size (m). None keeps the scene's value."""
+    scene = json.loads(json.dumps(base))
     scene["domain"]["resolution"] = resolution
-    scene["material"]["viscosity"] = eta
-    scene["frames"] = frames
-    scene["seed"] = seed
-    scene["output"] = {"particles": True, "vdb": False, "mesh": False}
+    scene["material"]["viscosity"] = viscosity
+    if surface_tension is not None:
+        scene["material"]["surface_tension"] = surface_tension
+    scene["frames"], scene["seed"] = frames, seed
+    if particles_per_cell is not None:
+        scene.setdefault("solver", {})["particles_per_cell"] = particles_per_cell
+    scene["output"] = {"particles": True, "vdb": vdb, "mesh": False}
+    cell = max(hi - lo for lo, hi in zip(scene["domain"]["min"], scene["domain"]["max"])) / resolution
+    return scene, cell
+
+
+def drained_fraction(engine, scene, resolution, eta, frames, seed):
+    scene, _ = scene_variant(scene, resolution, eta, frames, seed)
     cup = next(s for s in scene["solids"] if s["type"] == "cup")
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
