@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-r"""How fast the sample cup's first liquid falls from the hole, by grid, particles per cell and surface tension.
+r"""How fast the sample cup's first liquid falls from its hole, by grid, particles and surface tension.
 
 The sample cup (sample_scenes/capture_cup.json) is simulated at --viscosity for --frames frames
 with the built engine: at --peer-resolution with 8 particles per cell (the Table 1 references'

@@ -61,11 +61,8 @@ def drained_fraction(engine, scene, resolution, eta, frames, seed):
     scene, _ = scene_variant(scene, resolution, eta, frames, seed)
     cup = next(s for s in scene["solids"] if s["type"] == "cup")
     with tempfile.TemporaryDirectory() as tmp:
-        tmp = pathlib.Path(tmp)
-        (tmp / "scene.json").write_text(json.dumps(scene))
-        subprocess.run([str(engine), "simulate", str(tmp / "scene.json"), "--out", str(tmp / "out"),
-                        "--progress", "none"], check=True)
-        p = read_particles(tmp / "out" / f"particles_{frames:05d}.bin")
+        out = simulate(engine, scene, pathlib.Path(tmp) / "run", f"{resolution} cells, η {eta:g}, seed {seed}")
+        p = read_particles(out / f"particles_{frames:05d}.bin")
     return float(np.mean(p[:, 2] < cup["position"][2]))
 
 
