@@ -106,7 +106,9 @@ struct SolverSettings {
     double tolerance = 1e-4;      // relative residual of the Stokes solve
     int maxIterations = 2000;
     // Cells a particle may cross per step. 2 rather than 1 halves the steps of fast flows: the
-    // sample cup at η = 3 Pa·s, 48³, ran 1.8× faster and drained within 0.6 % of the same.
+    // sample cup at η = 3 Pa·s, 48³, ran 1.8× faster and drained within 0.6 % of the same. Its
+    // first liquid's tip fell too slowly at 2 until the start of motion got shorter steps of its
+    // own (kStartupStepShare in sim/simulation.cpp).
     double cfl = 2.0;
     int particlesPerCell = 8;
     int picardIterations = 3;     // for shear-dependent models only
