@@ -36,6 +36,12 @@ json baseScene(double viscosity, int resolution) {
     return s;
 }
 
+json sampleCupScene() {
+    json doc;
+    std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;
+    return doc;
+}
+
 double maxParticleSpeed(const sim::Simulation& s) {
     double v = 0;
     for (const Vec3& p : s.particles().velocity) v = std::max(v, p.norm());
@@ -236,8 +242,7 @@ TEST(Physics, ReportedPressureIsHydrostaticInCutCells) {
 // The grid is lowered (by under a cell) until the cup's underside lies 2 % of a cell below a row
 // of z-faces, whatever the resolution, and still covers the whole domain (see sim::sceneGrid).
 TEST(Physics, GridPutsTheCupsUndersideJustBelowARowOfFaces) {
-    json doc;
-    std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;
+    json doc = sampleCupScene();
     for (const int resolution : {32, 48, 64, 96}) {
         doc["domain"]["resolution"] = resolution;
         const Scene scene = parseScene(doc, "sample cup");
@@ -257,8 +262,7 @@ TEST(Physics, GridPutsTheCupsUndersideJustBelowARowOfFaces) {
 }
 
 TEST(Physics, NoLiquidAppearsUnderTheCupsThinBottom) {
-    json doc;
-    std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;
+    json doc = sampleCupScene();
     doc["domain"]["resolution"] = 48;
     sim::Simulation s(parseScene(doc, "sample cup"));
     const CupSolid* cup = nullptr;
@@ -293,8 +297,7 @@ TEST(Physics, NoLiquidAppearsUnderTheCupsThinBottom) {
 // half a cell at every frame. (Measured at 32³: 0.32 cells behind at frame 7; with the CFL limit
 // alone, without the start-up cap of sim/simulation.cpp, 1.44.)
 TEST(Physics, FirstLiquidOutOfTheHoleFallsAsWithShorterSteps) {
-    json doc;
-    std::ifstream(std::string(VISCOSCOPE_SOURCE_DIR) + "/sample_scenes/capture_cup.json") >> doc;
+    json doc = sampleCupScene();
     doc["domain"]["resolution"] = 32;
     doc["material"]["viscosity"] = 3.0;
     doc["frames"] = 7;
