@@ -553,7 +553,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             checkpoint(Clock::now());
             break;
         }
-        if (g - coarseEnd >= job.fidelity.minFineGenerations && !fitsBudget(fineGenerationSeconds() + alignmentSeconds())) {
+        // Predicted with the margin the minimum generations are reserved with: without it, a
+        // generation that ran past the mean of those before it ended the η = 30 row of the sample
+        // cup's table 5 s past its 600 s budget.
+        if (g - coarseEnd >= job.fidelity.minFineGenerations &&
+            !fitsBudget(kFineTimeMargin * fineGenerationSeconds() + alignmentSeconds())) {
             stop = StopReason::TimeBudget;
             checkpoint(Clock::now());
             break;
