@@ -1,0 +1,141 @@
+// How wide the particle surface draws a simulation's falling stream, against the surface's voxel
+// size and the particles' density: what a silhouette sees of the same liquid on another grid.
+//
+// Reads the particles a `simulate`/`synth` run wrote (SIM/particles_NNNNN.bin and its scene,
+// SIM/simulation.json) and surfaces them as the engine does (surface::liquidLevelSet), at each
+// --voxels-per-cell and each --coarsen c: a random 1/c³ of the particles at c times the spacing,
+// as a grid c times coarser seeds them. It meshes each surface and prints the stream's mean outline
+// width along x (what a camera on the y axis sees: the spread of the mesh's vertices in 2 mm bins
+// of height, between the outlet of the first holed cup and a quarter of its fall above the ground,
+// within 3 hole radii of its axis) and the diameter of a disc holding the liquid the particles
+// carry in the same bins. With the defaults the first line is the surface `simulate` writes.
+//
+//   surface_outline_bench --sim DIR [--frames 10,15,...] [--voxels-per-cell 2,3,4] [--coarsen 1,2]
+#include "scene/scene.h"
+#include "surface/surface.h"
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+#include <openvdb/openvdb.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <random>
+#include <string>
+
+using namespace viscoscope;
+
+namespace {
+
+constexpr double kBin = 0.002;  // m of height per outline sample
+
+struct Stream {
+    Eigen::Vector2d axis;
+    double zLow = 0, zHigh = 0, reach = 0;
+    bool contains(const Eigen::Vector3d& x) const {
+        return x.z() >= zLow && x.z() < zHigh && (x.head<2>() - axis).norm() < reach;
+    }
+    int bin(double z) const { return static_cast<int>((z - zLow) / kBin); }
+    int bins() const { return static_cast<int>((zHigh - zLow) / kBin); }
+};
+
+// Mean over the bins with liquid of the outline's width along x, in metres.
+double meanOutlineWidth(const std::vector<openvdb::Vec3s>& points, const Stream& stream) {
+    std::vector<double> lo(stream.bins(), INFINITY), hi(stream.bins(), -INFINITY);
+    for (const openvdb::Vec3s& p : points) {
+        const Eigen::Vector3d x(p.x(), p.y(), p.z());
+        if (!stream.contains(x)) continue;
+        const int b = std::min(stream.bin(x.z()), stream.bins() - 1);
+        lo[b] = std::min(lo[b], x.x());
+        hi[b] = std::max(hi[b], x.x());
+    }
+    double sum = 0;
+    int count = 0;
+    for (int b = 0; b < stream.bins(); ++b)
+        if (hi[b] > lo[b]) {
+            sum += hi[b] - lo[b];
+            ++count;
+        }
+    return count > 0 ? sum / count : NAN;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"Outline width of a simulated stream against the surface's voxel size and particle density"};
+    std::string simDir;
+    std::vector<int> frames{10, 15, 20, 25, 30, 35, 40, 45, 50, 55, 60}, coarsen{1, 2};
+    std::vector<double> voxelsPerCell{2, 3, 4};
+    app.add_option("--sim", simDir, "folder with particles_NNNNN.bin and simulation.json")->required();
+    app.add_option("--frames", frames, "frames to average over")->delimiter(',');
+    app.add_option("--voxels-per-cell", voxelsPerCell, "surface voxels per unit (the cell at 8 particles per cell)")
+        ->delimiter(',');
+    app.add_option("--coarsen", coarsen, "keep 1/c³ of the particles at c times the spacing")->delimiter(',');
+    CLI11_PARSE(app, argc, argv);
+    try {
+        openvdb::initialize();
+        const std::filesystem::path dir(simDir);
+        const std::filesystem::path record = dir / "simulation.json";
+        std::ifstream recordStream(record);
+        const nlohmann::json doc = nlohmann::json::parse(recordStream, nullptr, false);
+        if (doc.is_discarded() || !doc.contains("scene"))
+            throw InputError(record.string() + ": not a simulation record with a \"scene\"");
+        const Scene scene = parseScene(doc["scene"], record.string() + ": scene");
+        const CupSolid* cup = firstHoledCup(scene);
+        const std::optional<double> ground = groundHeight(scene);
+        if (!cup || !ground) throw InputError(simDir + ": the scene needs a cup with a hole above the ground");
+        Stream stream;
+        stream.axis = cup->position.head<2>();
+        stream.zHigh = cup->position.z() - scene.cellSize();
+        stream.zLow = *ground + 0.25 * (cup->position.z() - *ground);
+        stream.reach = 3 * cup->holeRadius;
+        const double scale = surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell);
+
+        // The liquid the particles carry, as the diameter of a disc per bin (mean over bins with liquid).
+        double carried = 0;
+        int carriedBins = 0;
+        std::vector<std::vector<Eigen::Vector3d>> positions;
+        for (int frame : frames) {
+            char name[64];
+            std::snprintf(name, sizeof name, "particles_%05d.bin", frame);
+            positions.push_back(surface::readParticles(dir / name).position);
+            const double volume = std::pow(scene.cellSize(), 3) / scene.solver.particlesPerCell;
+            std::vector<int> count(stream.bins(), 0);
+            for (const Eigen::Vector3d& x : positions.back())
+                if (stream.contains(x)) ++count[std::min(stream.bin(x.z()), stream.bins() - 1)];
+            for (int c : count)
+                if (c > 0) {
+                    carried += 2 * std::sqrt(c * volume / kBin / M_PI);
+                    ++carriedBins;
+                }
+        }
+        std::printf("%s: %zu frames, cell %.3f mm; the particles carry a disc %.3f mm across\n", simDir.c_str(),
+                    frames.size(), 1000 * scene.cellSize(), 1000 * carried / carriedBins);
+        std::printf("%8s %9s %9s %11s %9s\n", "coarsen", "voxels/u", "voxel mm", "outline mm", "/ carried");
+        for (int c : coarsen)
+            for (double v : voxelsPerCell) {
+                std::mt19937 random(7);
+                std::uniform_real_distribution<double> unit(0, 1);
+                double sum = 0;
+                for (const auto& all : positions) {
+                    std::vector<Eigen::Vector3d> kept;
+                    for (const Eigen::Vector3d& x : all)
+                        if (unit(random) * c * c * c < 1) kept.push_back(x);
+                    surface::SurfaceOptions options;
+                    options.voxelsPerCell = v;
+                    const auto levelSet = surface::liquidLevelSet(kept, c * scale, options);
+                    std::vector<openvdb::Vec3s> points;
+                    std::vector<openvdb::Vec3I> triangles;
+                    surface::meshLevelSet(*levelSet, points, triangles);
+                    sum += meanOutlineWidth(points, stream);
+                }
+                const double width = sum / positions.size();
+                std::printf("%8d %9.1f %9.3f %11.3f %9.3f\n", c, v, 1000 * c * scale / v, 1000 * width,
+                            width / (carried / carriedBins));
+            }
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "surface_outline_bench: %s\n", e.what());
+        return 2;
+    }
+}
