@@ -112,12 +112,14 @@ int main(int argc, char** argv) {
         }
         std::printf("%s: %zu frames, cell %.3f mm; the particles carry a disc %.3f mm across\n", simDir.c_str(),
                     frames.size(), 1000 * scene.cellSize(), 1000 * carried / carriedBins);
-        std::printf("%8s %9s %9s %11s %9s\n", "coarsen", "voxels/u", "voxel mm", "outline mm", "/ carried");
+        std::printf("%8s %9s %9s %11s %9s %7s\n", "coarsen", "voxels/u", "voxel mm", "outline mm", "/ carried",
+                    "frames");
         for (int c : coarsen)
             for (double v : voxelsPerCell) {
                 std::mt19937 random(7);
                 std::uniform_real_distribution<double> unit(0, 1);
                 double sum = 0;
+                int drawn = 0;  // frames whose surface reaches the stream's bins
                 for (const auto& all : positions) {
                     std::vector<Eigen::Vector3d> kept;
                     for (const Eigen::Vector3d& x : all)
@@ -128,11 +130,15 @@ int main(int argc, char** argv) {
                     std::vector<openvdb::Vec3s> points;
                     std::vector<openvdb::Vec3I> triangles;
                     surface::meshLevelSet(*levelSet, points, triangles);
-                    sum += meanOutlineWidth(points, stream);
+                    const double width = meanOutlineWidth(points, stream);
+                    if (std::isfinite(width)) {
+                        sum += width;
+                        ++drawn;
+                    }
                 }
-                const double width = sum / positions.size();
-                std::printf("%8d %9.1f %9.3f %11.3f %9.3f\n", c, v, 1000 * c * scale / v, 1000 * width,
-                            width / (carried / carriedBins));
+                const double width = sum / drawn;
+                std::printf("%8d %9.1f %9.3f %11.3f %9.3f %7d\n", c, v, 1000 * c * scale / v, 1000 * width,
+                            width / (carried / carriedBins), drawn);
             }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "surface_outline_bench: %s\n", e.what());
