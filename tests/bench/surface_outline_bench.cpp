@@ -93,6 +93,7 @@ int main(int argc, char** argv) {
         const double scale = surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell);
 
         // The liquid the particles carry, as the diameter of a disc per bin (mean over bins with liquid).
+        const double volume = std::pow(scene.cellSize(), 3) / scene.solver.particlesPerCell;  // per particle
         double carried = 0;
         int carriedBins = 0;
         std::vector<std::vector<Eigen::Vector3d>> positions;
@@ -100,7 +101,6 @@ int main(int argc, char** argv) {
             char name[64];
             std::snprintf(name, sizeof name, "particles_%05d.bin", frame);
             positions.push_back(surface::readParticles(dir / name).position);
-            const double volume = std::pow(scene.cellSize(), 3) / scene.solver.particlesPerCell;
             std::vector<int> count(stream.bins(), 0);
             for (const Eigen::Vector3d& x : positions.back())
                 if (stream.contains(x)) ++count[std::min(stream.bin(x.z()), stream.bins() - 1)];
@@ -110,6 +110,7 @@ int main(int argc, char** argv) {
                     ++carriedBins;
                 }
         }
+        if (carriedBins == 0) throw InputError(simDir + ": no liquid below the outlet in the given frames");
         std::printf("%s: %zu frames, cell %.3f mm; the particles carry a disc %.3f mm across\n", simDir.c_str(),
                     frames.size(), 1000 * scene.cellSize(), 1000 * carried / carriedBins);
         std::printf("%8s %9s %9s %11s %9s %7s\n", "coarsen", "voxels/u", "voxel mm", "outline mm", "/ carried",
