@@ -15,12 +15,10 @@
 #include "surface/surface.h"
 
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 #include <openvdb/openvdb.h>
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <random>
 #include <string>
 
@@ -76,12 +74,7 @@ int main(int argc, char** argv) {
     try {
         openvdb::initialize();
         const std::filesystem::path dir(simDir);
-        const std::filesystem::path record = dir / "simulation.json";
-        std::ifstream recordStream(record);
-        const nlohmann::json doc = nlohmann::json::parse(recordStream, nullptr, false);
-        if (doc.is_discarded() || !doc.contains("scene"))
-            throw InputError(record.string() + ": not a simulation record with a \"scene\"");
-        const Scene scene = parseScene(doc["scene"], record.string() + ": scene");
+        const Scene scene = loadRecordedScene(dir / "simulation.json");
         const CupSolid* cup = firstHoledCup(scene);
         const std::optional<double> ground = groundHeight(scene);
         if (!cup || !ground) throw InputError(simDir + ": the scene needs a cup with a hole above the ground");

@@ -85,11 +85,7 @@ std::optional<Scene> scoredScene(const ScoreArguments& args) {
     if (!args.scene.empty()) return loadScene(args.scene);
     const fs::path record = fs::path(args.sim) / "simulation.json";
     if (!fs::exists(record)) return std::nullopt;
-    std::ifstream stream(record);
-    const nlohmann::json doc = nlohmann::json::parse(stream, nullptr, false);
-    if (doc.is_discarded() || !doc.contains("scene"))
-        throw InputError(record.string() + ": not a simulation record with a \"scene\"");
-    return parseScene(doc["scene"], record.string() + ": scene");
+    return loadRecordedScene(record);
 }
 
 // A surface's silhouette; with `solids`, as identify draws it: the parts of the particle spheres

@@ -340,6 +340,14 @@ Scene loadScene(const std::filesystem::path& file) {
     return scene;
 }
 
+Scene loadRecordedScene(const std::filesystem::path& record) {
+    std::ifstream in(record);
+    const json doc = json::parse(in, nullptr, false);
+    if (doc.is_discarded() || !doc.contains("scene"))
+        throw InputError(record.string() + ": not a simulation record with a \"scene\"");
+    return parseScene(doc["scene"], record.string() + ": scene");
+}
+
 namespace {
 json toJson(const Vec3& v) { return json::array({v.x(), v.y(), v.z()}); }
 

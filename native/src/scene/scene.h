@@ -142,6 +142,8 @@ struct Scene {
 Scene parseScene(const nlohmann::json& doc, const std::string& origin,
                  const std::filesystem::path& baseDir = {});
 Scene loadScene(const std::filesystem::path& file);
+// The scene a simulation folder's record (`simulate`'s DIR/simulation.json) says it ran.
+Scene loadRecordedScene(const std::filesystem::path& record);
 // Valid settings that will give wrong physics, one line each naming the solid and the fix: a cup's
 // hole spanning fewer cells than the drain rate needs.
 std::vector<std::string> resolutionWarnings(const Scene& scene);
