@@ -17,6 +17,7 @@
 #include <CLI/CLI.hpp>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -34,7 +35,8 @@ struct Stream {
     bool contains(const Eigen::Vector3d& x) const {
         return x.z() >= zLow && x.z() < zHigh && (x.head<2>() - axis).norm() < reach;
     }
-    int bin(double z) const { return static_cast<int>((z - zLow) / kBin); }
+    // The top bin also takes the remainder of the range below zHigh.
+    int bin(double z) const { return std::min(static_cast<int>((z - zLow) / kBin), bins() - 1); }
     int bins() const { return static_cast<int>((zHigh - zLow) / kBin); }
 };
 
@@ -44,7 +46,7 @@ double meanOutlineWidth(const std::vector<openvdb::Vec3s>& points, const Stream&
     for (const openvdb::Vec3s& p : points) {
         const Eigen::Vector3d x(p.x(), p.y(), p.z());
         if (!stream.contains(x)) continue;
-        const int b = std::min(stream.bin(x.z()), stream.bins() - 1);
+        const int b = stream.bin(x.z());
         lo[b] = std::min(lo[b], x.x());
         hi[b] = std::max(hi[b], x.x());
     }
@@ -96,7 +98,7 @@ int main(int argc, char** argv) {
             positions.push_back(surface::readParticles(dir / name).position);
             std::vector<int> count(stream.bins(), 0);
             for (const Eigen::Vector3d& x : positions.back())
-                if (stream.contains(x)) ++count[std::min(stream.bin(x.z()), stream.bins() - 1)];
+                if (stream.contains(x)) ++count[stream.bin(x.z())];
             for (int c : count)
                 if (c > 0) {
                     carried += 2 * std::sqrt(c * volume / kBin / M_PI);
