@@ -1,16 +1,19 @@
-// How wide the particle surface draws a simulation's falling stream, against the surface's voxel
-// size and the particles' density: what a silhouette sees of the same liquid on another grid.
+// How wide the particle surface draws a simulation's falling stream, against the surface's
+// smoothing, its voxel size and the particles' density: what a silhouette sees of the same liquid on
+// another grid.
 //
 // Reads the particles a `simulate`/`synth` run wrote (SIM/particles_NNNNN.bin and its scene,
 // SIM/simulation.json) and surfaces them as the engine does (surface::liquidLevelSet), at each
-// --voxels-per-cell and each --coarsen c: a random 1/c³ of the particles at c times the spacing,
-// as a grid c times coarser seeds them. It meshes each surface and prints the stream's mean outline
+// --smoothing-mm σ (default: the recorded scene's), each --voxel-mm (default: the engine's for σ)
+// and each --coarsen c: a random 1/c³ of the particles at c times the spacing, as a grid c times
+// coarser seeds them. It meshes each surface and prints the stream's mean outline
 // width along x (what a camera on the y axis sees: the spread of the mesh's vertices in 2 mm bins
 // of height, between the outlet of the first holed cup and a quarter of its fall above the ground,
 // within 3 hole radii of its axis) and the diameter of a disc holding the liquid the particles
 // carry in the same bins. With the defaults the first line is the surface `simulate` writes.
 //
-//   surface_outline_bench --sim DIR [--frames 10,15,...] [--voxels-per-cell 2,3,4] [--coarsen 1,2]
+//   surface_outline_bench --sim DIR [--frames 10,15,...] [--smoothing-mm 1.4] [--voxel-mm 1.9,0.9]
+//                         [--coarsen 1,2]
 #include "scene/scene.h"
 #include "surface/surface.h"
 
@@ -66,10 +69,11 @@ int main(int argc, char** argv) {
     CLI::App app{"Outline width of a simulated stream against the surface's voxel size and particle density"};
     std::string simDir;
     std::vector<int> frames{10, 15, 20, 25, 30, 35, 40, 45, 50, 55, 60}, coarsen{1, 2};
-    std::vector<double> voxelsPerCell{2, 3, 4};
+    std::vector<double> smoothingMm, voxelMm;
     app.add_option("--sim", simDir, "folder with particles_NNNNN.bin and simulation.json")->required();
     app.add_option("--frames", frames, "frames to average over")->delimiter(',');
-    app.add_option("--voxels-per-cell", voxelsPerCell, "surface voxels per unit (the cell at 8 particles per cell)")
+    app.add_option("--smoothing-mm", smoothingMm, "surface smoothing σ (default: the recorded scene's)")->delimiter(',');
+    app.add_option("--voxel-mm", voxelMm, "surface voxel sizes (default: what the engine picks for each σ)")
         ->delimiter(',');
     app.add_option("--coarsen", coarsen, "keep 1/c³ of the particles at c times the spacing")->delimiter(',');
     CLI11_PARSE(app, argc, argv);
@@ -85,7 +89,7 @@ int main(int argc, char** argv) {
         stream.zHigh = cup->position.z() - scene.cellSize();
         stream.zLow = *ground + 0.25 * (cup->position.z() - *ground);
         stream.reach = 3 * cup->holeRadius;
-        const double scale = surface::surfaceScale(scene.cellSize(), scene.solver.particlesPerCell);
+        if (smoothingMm.empty()) smoothingMm.push_back(1000 * scene.surfaceSmoothing());
 
         // The liquid the particles carry, as the diameter of a disc per bin (mean over bins with liquid).
         const double volume = std::pow(scene.cellSize(), 3) / scene.solver.particlesPerCell;  // per particle
@@ -108,34 +112,35 @@ int main(int argc, char** argv) {
         if (carriedBins == 0) throw InputError(simDir + ": no liquid below the outlet in the given frames");
         std::printf("%s: %zu frames, cell %.3f mm; the particles carry a disc %.3f mm across\n", simDir.c_str(),
                     frames.size(), 1000 * scene.cellSize(), 1000 * carried / carriedBins);
-        std::printf("%8s %9s %9s %11s %9s %7s\n", "coarsen", "voxels/u", "voxel mm", "outline mm", "/ carried",
+        std::printf("%8s %9s %9s %11s %9s %7s\n", "coarsen", "σ mm", "voxel mm", "outline mm", "/ carried",
                     "frames");
         for (int c : coarsen)
-            for (double v : voxelsPerCell) {
-                std::mt19937 random(7);
-                std::uniform_real_distribution<double> unit(0, 1);
-                double sum = 0;
-                int drawn = 0;  // frames whose surface reaches the stream's bins
-                for (const auto& all : positions) {
-                    std::vector<Eigen::Vector3d> kept;
-                    for (const Eigen::Vector3d& x : all)
-                        if (unit(random) * c * c * c < 1) kept.push_back(x);
-                    surface::SurfaceOptions options;
-                    options.voxelsPerCell = v;
-                    const auto levelSet = surface::liquidLevelSet(kept, c * scale, options);
-                    std::vector<openvdb::Vec3s> points;
-                    std::vector<openvdb::Vec3I> triangles;
-                    surface::meshLevelSet(*levelSet, points, triangles);
-                    const double width = meanOutlineWidth(points, stream);
-                    if (std::isfinite(width)) {
-                        sum += width;
-                        ++drawn;
+            for (double sigmaMm : smoothingMm)
+                for (double vMm : voxelMm.empty() ? std::vector<double>{1000 * surface::surfaceVoxelSize(sigmaMm / 1000)}
+                                                  : voxelMm) {
+                    std::mt19937 random(7);
+                    std::uniform_real_distribution<double> unit(0, 1);
+                    double sum = 0;
+                    int drawn = 0;  // frames whose surface reaches the stream's bins
+                    for (const auto& all : positions) {
+                        std::vector<Eigen::Vector3d> kept;
+                        for (const Eigen::Vector3d& x : all)
+                            if (unit(random) * c * c * c < 1) kept.push_back(x);
+                        const auto levelSet =
+                            surface::liquidLevelSet(kept, c * c * c * volume, sigmaMm / 1000, vMm / 1000);
+                        std::vector<openvdb::Vec3s> points;
+                        std::vector<openvdb::Vec3I> triangles;
+                        surface::meshLevelSet(*levelSet, points, triangles);
+                        const double width = meanOutlineWidth(points, stream);
+                        if (std::isfinite(width)) {
+                            sum += width;
+                            ++drawn;
+                        }
                     }
+                    const double width = sum / drawn;
+                    std::printf("%8d %9.3f %9.3f %11.3f %9.3f %7d\n", c, sigmaMm, vMm, 1000 * width,
+                                width / (carried / carriedBins), drawn);
                 }
-                const double width = sum / drawn;
-                std::printf("%8d %9.1f %9.3f %11.3f %9.3f %7d\n", c, v, 1000 * c * scale / v, 1000 * width,
-                            width / (carried / carriedBins), drawn);
-            }
     } catch (const std::exception& e) {
         std::fprintf(stderr, "surface_outline_bench: %s\n", e.what());
         return 2;

@@ -132,7 +132,7 @@ TEST_F(CliObserve, ExtractThenScoreWithJsonProgress) {
     EXPECT_TRUE(fs::exists(dir_ / "score" / "diff_00005.png"));
 }
 
-// score draws a simulated surface as identify does: the particle spheres' reach below the ground is
+// score draws a simulated surface as identify does: the surface's reach below the ground is
 // cut off, with the solids of the scene `simulate` recorded beside the frames (or of --scene).
 // Against an empty reference, E by pixels is the silhouette's area, so the cut must lower it.
 TEST_F(CliObserve, ScoreClipsSurfacesToTheSceneSolids) {

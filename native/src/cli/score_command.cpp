@@ -88,7 +88,7 @@ std::optional<Scene> scoredScene(const ScoreArguments& args) {
     return loadRecordedScene(record);
 }
 
-// A surface's silhouette; with `solids`, as identify draws it: the parts of the particle spheres
+// A surface's silhouette; with `solids`, as identify draws it: the parts of the liquid surface
 // inside solids (below the ground, in walls) removed, since no camera sees liquid there.
 cv::Mat1b simulatedSilhouette(const fs::path& file, const PinholeCamera& camera, bool fast,
                               const std::string& cameraFile, const sim::SolidField* solids) {

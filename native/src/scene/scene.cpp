@@ -237,6 +237,10 @@ std::vector<std::string> resolutionWarnings(const Scene& scene) {
 
 double Scene::cellSize() const { return (domain.max - domain.min).maxCoeff() / domain.resolution; }
 
+double Scene::surfaceSmoothing() const {
+    return outputs.surfaceSmoothing > 0 ? outputs.surfaceSmoothing : kSurfaceSmoothingPerCell * cellSize();
+}
+
 Eigen::Vector3i Scene::cellCounts() const {
     const Vec3 extent = (domain.max - domain.min) / cellSize();
     return extent.array().round().cast<int>().max(1);
@@ -322,7 +326,14 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
         scene.outputs.particles = o.boolean("particles", scene.outputs.particles);
         scene.outputs.vdb = o.boolean("vdb", scene.outputs.vdb);
         scene.outputs.mesh = o.boolean("mesh", scene.outputs.mesh);
+        if (o.has("surface_smoothing")) {
+            scene.outputs.surfaceSmoothing = o.positive("surface_smoothing");
+            if (!(scene.outputs.surfaceSmoothing < 4 * scene.cellSize()))
+                o.fail("surface_smoothing", "must be below 4 cells (" + FieldReader::format(4 * scene.cellSize()) +
+                                                " m), got " + FieldReader::format(scene.outputs.surfaceSmoothing));
+        }
     }
+    scene.outputs.surfaceSmoothing = scene.surfaceSmoothing();
     return scene;
 }
 
@@ -426,7 +437,8 @@ json sceneToJson(const Scene& s) {
           {"picard_iterations", s.solver.picardIterations},
           {"hole_conductance", s.solver.holeConductance == HoleConductance::Dagan ? "dagan" : "grid"}}},
         {"output",
-         {{"particles", s.outputs.particles}, {"vdb", s.outputs.vdb}, {"mesh", s.outputs.mesh}}},
+         {{"particles", s.outputs.particles}, {"vdb", s.outputs.vdb}, {"mesh", s.outputs.mesh},
+          {"surface_smoothing", s.outputs.surfaceSmoothing}}},
     };
 }
 

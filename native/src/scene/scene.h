@@ -119,7 +119,15 @@ struct Outputs {
     bool particles = true;
     bool vdb = true;
     bool mesh = false;
+    // σ (m) of the Gaussian that draws the liquid's surface from its particles (surface::liquidLevelSet);
+    // 0: kSurfaceSmoothingPerCell of the scene's cell. parseScene sets it from the file's
+    // "surface_smoothing" or that default at the file's resolution, so it stays when a run changes
+    // the resolution (synth's finer reference, identify's grids): every grid draws the liquid alike.
+    double surfaceSmoothing = 0;
 };
+// 0.75 of the seeding spacing at 8 particles per cell: about 19 particles under the kernel, so the
+// density inside the liquid varies by about a quarter and its half level leaves no holes there.
+constexpr double kSurfaceSmoothingPerCell = 0.375;
 
 struct Scene {
     std::filesystem::path sourceFile;
@@ -136,6 +144,7 @@ struct Scene {
 
     double cellSize() const;
     Eigen::Vector3i cellCounts() const;
+    double surfaceSmoothing() const;  // outputs.surfaceSmoothing, resolved
 };
 
 // Parses and validates. Throws InputError("scene.json: material.viscosity: must be > 0, got -1").

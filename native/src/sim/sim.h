@@ -61,12 +61,11 @@ struct FrameStats {
 // tools::LevelSetTracker and smoothed by `smoothingPasses` Gaussian passes (tools::Filter). Voxel
 // centres sit at `origin` + (i + ½) voxelSize, so with voxelSize = Δx they coincide with the cell
 // centres.
-// `halfWidth` is the narrow band's half-width in voxels; `inset` (≤ the band's inner half, world
-// units) moves the surface inwards, e.g. to undo the spheres' reach beyond the liquid.
+// `halfWidth` is the narrow band's half-width in voxels.
 inline constexpr double kDefaultBandHalfWidth = 3.0;
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
                                          const Vec3& origin, int smoothingPasses,
-                                         double halfWidth = kDefaultBandHalfWidth, double inset = 0.0);
+                                         double halfWidth = kDefaultBandHalfWidth);
 
 // The MAC grid a simulation of `scene` runs on: the domain's, lowered by under a cell (and one cell
 // taller) so that the underside of the first cup with a hole lies just below a row of z-faces.
@@ -125,6 +124,7 @@ public:
     double time() const { return time_; }
     int frame() const { return frame_; }
     double liquidVolume() const;
+    double particleVolume() const { return particleVolume_; }  // m³ of liquid each particle carries
     // The pressure at cell c's centre (Pa) as the faces feel it: the solve's unknown scaled by the
     // cell's liquid fraction W (its rows are W ∇·u), plus the Laplace pressure outside the liquid,
     // W p + (1 − W) σκ. It is the unknown itself in full cells; beside the sample cup's wall

@@ -364,7 +364,7 @@ openvdb::FloatGrid::Ptr rasterizeSpheres(const std::vector<Vec3>& positions, dou
 }  // namespace
 
 openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, double radius, double voxelSize,
-                                         const Vec3& origin, int smoothingPasses, double halfWidth, double inset) {
+                                         const Vec3& origin, int smoothingPasses, double halfWidth) {
     openvdb::initialize();
     auto transform = openvdb::math::Transform::createLinearTransform(voxelSize);
     const Vec3 offset = origin + Vec3::Constant(0.5 * voxelSize);
@@ -378,13 +378,6 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
         // of a pass's four box filters, which cost 3× as much at these sizes for the same drop
         // pressure (within 3 %).
         openvdb::tools::Filter<openvdb::FloatGrid>(*grid).gaussian(1, smoothingPasses);
-        tracker.track();
-    }
-    if (inset > 0) {
-        // On a distance field a constant moves the surface by as much (on the filtered field, whose
-        // gradient the clamped band edges flatten, it moved it 1.5× as far); one renormalization
-        // then rebuilds the band, where LevelSetFilter::offset would take half-voxel steps.
-        for (auto voxel = grid->tree().beginValueOn(); voxel; ++voxel) voxel.setValue(*voxel + static_cast<float>(inset));
         tracker.track();
     }
     return grid;

@@ -2,6 +2,8 @@
 
 #include "scene/scene.h"
 
+#include <openvdb/tools/Dense.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/VolumeToMesh.h>
 
 #include <cstdint>
@@ -21,18 +23,86 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
 
 }  // namespace
 
-double surfaceScale(double cellSize, int particlesPerCell) { return 2 * cellSize / std::cbrt(particlesPerCell); }
-
-openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double scale,
-                                       const SurfaceOptions& options) {
-    return sim::particleLevelSet(positions, options.particleRadius * scale, scale / options.voxelsPerCell,
-                                 Eigen::Vector3d::Zero(), /*smoothingPasses=*/ 0, sim::kDefaultBandHalfWidth,
-                                 options.inset * scale);
+openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double particleVolume,
+                                       double smoothing, double voxelSize) {
+    auto transform = openvdb::math::Transform::createLinearTransform(voxelSize);
+    transform->postTranslate(openvdb::Vec3d(0.5 * voxelSize));  // voxel centres at (i + ½) h
+    if (positions.empty()) {
+        auto empty = openvdb::FloatGrid::create(static_cast<float>(sim::kDefaultBandHalfWidth * voxelSize));
+        empty->setTransform(transform);
+        empty->setGridClass(openvdb::GRID_LEVEL_SET);
+        empty->setName("surface");
+        return empty;
+    }
+    // The density is splatted by hand into a dense box around the particles: OpenVDB rasterizes
+    // points as spheres or trilinear weights, not as a Gaussian of a given width. Separable weights
+    // cost 3·(2R+1) exponentials per particle instead of (2R+1)³.
+    const double h = voxelSize;
+    const int reach = static_cast<int>(std::ceil(3 * smoothing / h));
+    openvdb::Coord lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+    std::vector<openvdb::Vec3d> index(positions.size());
+    for (size_t p = 0; p < positions.size(); ++p) {
+        index[p] = openvdb::Vec3d(positions[p].x(), positions[p].y(), positions[p].z()) / h - openvdb::Vec3d(0.5);
+        const openvdb::Coord c = openvdb::Coord::floor(index[p]);
+        lo.minComponent(c);
+        hi.maxComponent(c);
+    }
+    const openvdb::CoordBBox box(lo.offsetBy(-reach), hi.offsetBy(reach + 1));
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> density(box, 0.f);
+    const double norm = particleVolume / std::pow(std::sqrt(2 * M_PI) * smoothing, 3);
+    const int width = 2 * reach + 2;
+    std::vector<double> weight(3 * width);
+    for (const openvdb::Vec3d& u : index) {
+        const openvdb::Coord first = openvdb::Coord::floor(u).offsetBy(-reach);
+        for (int a = 0; a < 3; ++a)
+            for (int i = 0; i < width; ++i) {
+                const double d = (first[a] + i - u[a]) * h;
+                weight[a * width + i] = std::exp(-d * d / (2 * smoothing * smoothing));
+            }
+        for (int i = 0; i < width; ++i)
+            for (int j = 0; j < width; ++j) {
+                const double wij = norm * weight[i] * weight[width + j];
+                float* row = &density.getValue(first.offsetBy(i, j, 0));
+                for (int k = 0; k < width; ++k) row[k] += static_cast<float>(wij * weight[2 * width + k]);
+            }
+    }
+    // Near the half level, (½ − ρ)/|∇ρ| is the distance to it to first order, which is all a narrow
+    // band needs (at σ from it, 1.4 times the distance). Rebuilding a distance field through a mesh
+    // (tools::levelSetRebuild) cost 4–9 times the rest and narrowed thin streams by a third of a voxel.
+    const float band = static_cast<float>(sim::kDefaultBandHalfWidth * h);
+    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> distance(box, band);
+    const openvdb::Coord& first = box.min();
+    const openvdb::Coord& last = box.max();
+    for (int i = first.x() + 1; i < last.x(); ++i)
+        for (int j = first.y() + 1; j < last.y(); ++j)
+            for (int k = first.z() + 1; k < last.z(); ++k) {
+                const openvdb::Coord c(i, j, k);
+                const float rho = density.getValue(c);
+                if (rho == 0.f) continue;
+                const openvdb::Vec3f gradient(density.getValue(c.offsetBy(1, 0, 0)) - density.getValue(c.offsetBy(-1, 0, 0)),
+                                              density.getValue(c.offsetBy(0, 1, 0)) - density.getValue(c.offsetBy(0, -1, 0)),
+                                              density.getValue(c.offsetBy(0, 0, 1)) - density.getValue(c.offsetBy(0, 0, -1)));
+                const float slope = gradient.length() / static_cast<float>(2 * h);
+                const float d = (0.5f - rho) / std::max(slope, 1e-12f);
+                distance.getValue(c) = std::clamp(d, -band, band);
+            }
+    auto grid = openvdb::FloatGrid::create(band);
+    grid->setTransform(transform);
+    openvdb::tools::copyFromDense(distance, *grid, /*tolerance=*/0.f);  // the voxels not at +band
+    for (auto voxel = grid->tree().beginValueOn(); voxel; ++voxel)
+        if (*voxel <= -band) voxel.setValueOff();  // the inside beyond the band
+    openvdb::tools::pruneLevelSet(grid->tree());
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    grid->setName("surface");
+    return grid;
 }
 
-openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation, const SurfaceOptions& options) {
-    return liquidLevelSet(simulation.particles().position,
-                          surfaceScale(simulation.grid().dx, simulation.scene().solver.particlesPerCell), options);
+double surfaceVoxelSize(double smoothing) { return smoothing / kVoxelsPerSmoothing; }
+
+openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation) {
+    const double smoothing = simulation.scene().surfaceSmoothing();
+    return liquidLevelSet(simulation.particles().position, simulation.particleVolume(), smoothing,
+                          surfaceVoxelSize(smoothing));
 }
 
 void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids) {

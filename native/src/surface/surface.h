@@ -1,6 +1,5 @@
-// Particles → liquid surface → files. The surface is an OpenVDB narrow-band level set of spheres
-// around the particles, closed by an inset (sim::particleLevelSet); it can be meshed with
-// tools::volumeToMesh. Per-frame files:
+// Particles → liquid surface → files. The surface is an OpenVDB narrow-band level set of the
+// particles' smoothed density; it can be meshed with tools::volumeToMesh. Per-frame files:
 //   frame_NNNNN.vdb   grids "surface" (level set, m), "velocity" (Vec3f, m/s), "pressure" (Pa),
 //                     in world space (Blender's, Z-up, metres), cell-centred at the sim's Δx.
 //   particles_NNNNN.bin  particles, little-endian: char[4] "VSCP", uint32 version (1),
@@ -19,38 +18,25 @@
 
 namespace viscoscope::surface {
 
-struct SurfaceOptions {
-    // Lengths are in units of the scale liquidLevelSet is given, the simulation cell at the default
-    // 8 particles per cell (see surfaceScale).
-    double voxelsPerCell = 2;      // surface resolution: voxels per unit
-    double particleRadius = 0.75;
-    // How far the renormalized union of the spheres is moved inwards: with the spheres' radius this
-    // is a morphological closing, which fills the gaps between particles and leaves convex edges
-    // where the liquid ends. The spheres alone reach 0.46–0.54 cells beyond the liquid they fill, so
-    // a coarser grid would draw wider streams and puddles and bias an identification across
-    // resolutions; with the inset the reach is −0.07…+0.05 cells for streams, films, a film's edge and
-    // a drop of seeded particles, and up to 0.06 cells less once they have flowed
-    // (tests/native/surface_solids_test).
-    // Not smoothed: Gaussian passes move curved surfaces inwards as curvature flow does, and the
-    // edge of a film one cell thick, like the front of a spreading puddle, receded 0.67 cells. The
-    // sample cup's puddle at η = 1 then covered an area of radius 74.4 / 77.6 mm at 48³ / 64³ where
-    // the particles reached 78.6 / 80.3 mm: the coarse grid's puddle looked 4 % narrower.
-    double inset = 0.47;
-};
-
-// The unit of SurfaceOptions for a simulation's particles: twice their seeding spacing, which is the
-// cell at 8 per cell. The spheres must shrink with the spacing for the inset to keep the surface at
-// the liquid's edge: at 27 per cell, spheres sized to the cell would reach further out.
-double surfaceScale(double cellSize, int particlesPerCell);
-
-openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double scale,
-                                       const SurfaceOptions& options = {});
-// The surface of a simulation's liquid: its particles at surfaceScale of its grid and seeding.
-openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation, const SurfaceOptions& options = {});
+// The liquid's surface: the half level of the particles' volume density ρ(x) = V_p Σ_p G_σ(x − x_p),
+// smoothed by a Gaussian of `smoothing` σ (m) and sampled on voxels of `voxelSize` (m). ρ is 1 inside
+// the liquid and ½ at a flat edge whatever σ, so the surface lies where the liquid ends; across a
+// stream of radius R it moves in by about σ²/2R. With σ and the voxels fixed in metres that is the
+// same on every grid: the sample cup's stream at η = 1 drew 1.3 % less silhouette at 48³ than at
+// 96³, where spheres around the particles (whose outline is the outermost particle, further out
+// the more particles there are) drew 7 % less (tests/bench/surface_outline_bench).
+openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double particleVolume,
+                                       double smoothing, double voxelSize);
+// The surface of a simulation's liquid at its scene's surface smoothing σ, on voxels of
+// σ / kVoxelsPerSmoothing: at 48³ voxels of σ/0.75 (the cell's half) drew that stream 5 % narrower
+// than σ/1.5, which the 96³ reference's seeding spacing gives.
+constexpr double kVoxelsPerSmoothing = 1.5;
+double surfaceVoxelSize(double smoothing);
+openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation);
 
 // Removes what lies inside the simulation's solids from a liquid level set, φ ← max(φ, −d_solid):
-// the particle spheres reach a fraction of a cell below the ground and into walls, where no
-// camera can see liquid, and a silhouette compared with footage must not include it.
+// the smoothed particles reach a little below the ground and into walls, where no camera can see
+// liquid, and a silhouette compared with footage must not include it.
 void clipToSolidExterior(openvdb::FloatGrid& levelSet, const sim::SolidField& solids);
 
 // Triangles of the zero iso-surface (quads split in two).
