@@ -42,6 +42,19 @@ TEST(Scene, ValidSceneParsesInSiUnits) {
     EXPECT_DOUBLE_EQ(std::get<CupSolid>(s.solids[1]).holeRadius, 0.009);
 }
 
+// The surface smoothing is a length of the scene: a run on another grid draws the liquid alike.
+TEST(Scene, SurfaceSmoothingStaysInMetresWhenTheResolutionChanges) {
+    Scene s = parseScene(validScene(), "scene.json");
+    const double atFileResolution = s.surfaceSmoothing();
+    EXPECT_NEAR(atFileResolution, kSurfaceSmoothingPerCell * 0.18 / 32, 1e-15);
+    s.domain.resolution = 64;
+    EXPECT_EQ(s.surfaceSmoothing(), atFileResolution);
+    EXPECT_EQ(parseScene(sceneToJson(s), "copy.json").surfaceSmoothing(), atFileResolution);
+    json doc = validScene();
+    doc["output"] = {{"surface_smoothing", 0.002}};
+    EXPECT_EQ(parseScene(doc, "scene.json").surfaceSmoothing(), 0.002);
+}
+
 TEST(Scene, RoundTripsThroughJson) {
     const Scene a = parseScene(validScene(), "scene.json");
     const Scene b = parseScene(sceneToJson(a), "copy.json");
@@ -66,6 +79,8 @@ TEST(Scene, BadFieldsAreNamed) {
         {"/liquids/0/volume", 1.0, "scene.json.liquids[0].volume: exceeds the cup's capacity"},
         {"/version", 99, "scene.json.version: is 99, newer than this engine reads"},
         {"/solids/0/type", "sphere", "scene.json.solids[0].type: unknown solid type 'sphere'"},
+        {"/output/surface_smoothing", -0.001, "scene.json.output.surface_smoothing: must be > 0"},
+        {"/output/surface_smoothing", 0.03, "scene.json.output.surface_smoothing: must be below 4 cells"},
     };
     for (const Case& c : cases) {
         json doc = validScene();
