@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 
 namespace viscoscope::surface {
 
@@ -27,13 +28,12 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
                                        double smoothing, double voxelSize) {
     auto transform = openvdb::math::Transform::createLinearTransform(voxelSize);
     transform->postTranslate(openvdb::Vec3d(0.5 * voxelSize));  // voxel centres at (i + ½) h
-    if (positions.empty()) {
-        auto empty = openvdb::FloatGrid::create(static_cast<float>(sim::kDefaultBandHalfWidth * voxelSize));
-        empty->setTransform(transform);
-        empty->setGridClass(openvdb::GRID_LEVEL_SET);
-        empty->setName("surface");
-        return empty;
-    }
+    const float band = static_cast<float>(sim::kDefaultBandHalfWidth * voxelSize);
+    auto grid = openvdb::FloatGrid::create(band);  // outside beyond the band
+    grid->setTransform(transform);
+    grid->setGridClass(openvdb::GRID_LEVEL_SET);
+    grid->setName("surface");
+    if (positions.empty()) return grid;
     // The density is splatted by hand into a dense box around the particles: OpenVDB rasterizes
     // points as spheres or trilinear weights, not as a Gaussian of a given width. Separable weights
     // cost 3·(2R+1) exponentials per particle instead of (2R+1)³.
@@ -69,31 +69,24 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
     // Near the half level, (½ − ρ)/|∇ρ| is the distance to it to first order, which is all a narrow
     // band needs (at σ from it, 1.4 times the distance). Rebuilding a distance field through a mesh
     // (tools::levelSetRebuild) cost 4–9 times the rest and narrowed thin streams by a third of a voxel.
-    const float band = static_cast<float>(sim::kDefaultBandHalfWidth * h);
-    openvdb::tools::Dense<float, openvdb::tools::LayoutZYX> distance(box, band);
+    auto access = grid->getAccessor();
+    const auto rho = [&](const openvdb::Coord& c) { return density.getValue(c); };
     const openvdb::Coord& first = box.min();
     const openvdb::Coord& last = box.max();
     for (int i = first.x() + 1; i < last.x(); ++i)
         for (int j = first.y() + 1; j < last.y(); ++j)
             for (int k = first.z() + 1; k < last.z(); ++k) {
                 const openvdb::Coord c(i, j, k);
-                const float rho = density.getValue(c);
-                if (rho == 0.f) continue;
-                const openvdb::Vec3f gradient(density.getValue(c.offsetBy(1, 0, 0)) - density.getValue(c.offsetBy(-1, 0, 0)),
-                                              density.getValue(c.offsetBy(0, 1, 0)) - density.getValue(c.offsetBy(0, -1, 0)),
-                                              density.getValue(c.offsetBy(0, 0, 1)) - density.getValue(c.offsetBy(0, 0, -1)));
+                if (rho(c) == 0.f) continue;
+                const openvdb::Vec3f gradient(rho(c.offsetBy(1, 0, 0)) - rho(c.offsetBy(-1, 0, 0)),
+                                              rho(c.offsetBy(0, 1, 0)) - rho(c.offsetBy(0, -1, 0)),
+                                              rho(c.offsetBy(0, 0, 1)) - rho(c.offsetBy(0, 0, -1)));
                 const float slope = gradient.length() / static_cast<float>(2 * h);
-                const float d = (0.5f - rho) / std::max(slope, 1e-12f);
-                distance.getValue(c) = std::clamp(d, -band, band);
+                const float d = (0.5f - rho(c)) / std::max(slope, 1e-12f);
+                if (d <= -band) access.setValueOff(c, -band);  // inside beyond the band
+                else if (d < band) access.setValueOn(c, d);
             }
-    auto grid = openvdb::FloatGrid::create(band);
-    grid->setTransform(transform);
-    openvdb::tools::copyFromDense(distance, *grid, /*tolerance=*/0.f);  // the voxels not at +band
-    for (auto voxel = grid->tree().beginValueOn(); voxel; ++voxel)
-        if (*voxel <= -band) voxel.setValueOff();  // the inside beyond the band
     openvdb::tools::pruneLevelSet(grid->tree());
-    grid->setGridClass(openvdb::GRID_LEVEL_SET);
-    grid->setName("surface");
     return grid;
 }
 
