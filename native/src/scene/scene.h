@@ -126,7 +126,8 @@ struct Outputs {
     double surfaceSmoothing = 0;
 };
 // 0.75 of the seeding spacing at 8 particles per cell: about 19 particles under the kernel, so the
-// density inside the liquid varies by about a quarter and its half level leaves no holes there.
+// density inside the liquid varies by about a quarter, and seeded liquid shows no holes at its half
+// level (surface_solids_test).
 constexpr double kSurfaceSmoothingPerCell = 0.375;
 
 struct Scene {
