@@ -88,12 +88,9 @@ TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
         {"solids", {{{"type", "ground"}, {"height", 0.01}}}},
         {"liquids", {{{"type", "box"}, {"min", {0.01, 0.01, 0.01}}, {"max", {0.03, 0.03, 0.02}}}}},
         {"material", {{"density", 1000}, {"viscosity", 1.0}}}, {"fps", 30}, {"frames", 1}};
-    const sim::Simulation simulation(parseScene(doc, "clip"));
-    std::vector<Eigen::Vector3d> through = simulation.particles().position;
-    for (Eigen::Vector3d& x : through) x.z() -= 0.005;  // half the box below the ground
-    const double smoothing = simulation.scene().surfaceSmoothing();
-    const auto levelSet = surface::liquidLevelSet(through, simulation.particleVolume(), smoothing,
-                                                  surface::surfaceVoxelSize(smoothing));
+    sim::Simulation simulation(parseScene(doc, "clip"));
+    for (Eigen::Vector3d& x : simulation.particles().position) x.z() -= 0.005;  // half the box below the ground
+    const auto levelSet = surface::liquidLevelSet(simulation);
     auto insideVoxels = [&](bool below) {
         int count = 0;
         for (auto v = levelSet->cbeginValueOn(); v; ++v) {
