@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 
 using namespace viscoscope;
 namespace fs = std::filesystem;
@@ -146,14 +147,17 @@ namespace {
 double srgbToLinear(double v) { return v <= 0.04045 ? v / 12.92 : std::pow((v + 0.055) / 1.055, 2.4); }
 double linearToSrgb(double v) { return v <= 0.0031308 ? 12.92 * v : 1.055 * std::pow(v, 1 / 2.4) - 0.055; }
 
+const cv::Vec3d kBackdrop(200, 196, 190), kHoney(25, 85, 160);  // BGR, sRGB-encoded
+
 // A disc and a thin stream that move by fractions of a pixel, as a camera sees them: each pixel
 // mixes liquid and backdrop in linear light by the share of it the shapes cover (8 × 8 samples),
 // then the picture is sRGB-encoded, noised and compressed. `covered` gets the pixels ≥ half covered.
-cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered) {
+// `shade` darkens, as a cast shadow would, a band beside the disc that ends where the disc begins.
+cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered, const cv::Vec3d& liquid = kHoney,
+                           const std::optional<cv::Rect>& shadeBeside = std::nullopt, double shade = 1.0) {
     constexpr int kW = 160, kH = 120, kSub = 8;
     const double cx = 70 + 0.37 * frame, cy = 75 + 0.21 * frame, radius = 14.3 + 0.4 * frame;
     const double streamLeft = 77.3 + 0.13 * frame, streamWidth = 2.6;
-    const cv::Vec3d backdrop(200, 196, 190), honey(25, 85, 160);  // BGR, sRGB-encoded
     cv::Mat3b picture(kH, kW);
     covered.create(kH, kW);
     for (int row = 0; row < kH; ++row)
@@ -168,8 +172,10 @@ cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered) {
                 }
             const double alpha = inside / double(kSub * kSub);
             covered(row, col) = alpha >= 0.5 ? 255 : 0;
+            const bool shaded = shadeBeside && shadeBeside->contains({col, row});
             for (int c = 0; c < 3; ++c) {
-                const double light = alpha * srgbToLinear(honey[c] / 255) + (1 - alpha) * srgbToLinear(backdrop[c] / 255);
+                const double backdrop = srgbToLinear(kBackdrop[c] / 255) * (shaded ? shade : 1.0);
+                const double light = alpha * srgbToLinear(liquid[c] / 255) + (1 - alpha) * backdrop;
                 picture(row, col)[c] = cv::saturate_cast<uchar>(255 * linearToSrgb(light) + cv::theRNG().gaussian(1.5));
             }
         }
@@ -213,6 +219,47 @@ TEST(Extraction, OutlineKeepsThePixelsTheLiquidHalfCovers) {
     const double trimmed = areaRatio(0.5, "trimmed"), untrimmed = areaRatio(0, "untrimmed");
     EXPECT_NEAR(trimmed, 1.0, 0.03);
     EXPECT_GT(untrimmed, 1.05);  // what the trimming is for: MOG2 alone takes in the grazed pixels
+}
+
+// A translucent liquid that only darkens the backdrop (here grey, 0.3 of it in linear light) passes
+// MOG2's shadow test where it half covers a pixel: those edge pixels must still count as liquid,
+// while a cast shadow (0.7 of the backdrop) beside it, and under it where the two meet, must not.
+TEST(Extraction, ATranslucentLiquidsEdgeIsLiquidAndTheShadowBesideItIsNot) {
+    const TempDirectory temp("viscoscope_extract_translucent_test");
+    const fs::path& dir = temp.path;
+    cv::theRNG().state = 13;
+    constexpr int kEmpty = 5, kCount = 20;
+    constexpr double kLiquidShare = 0.3, kShade = 0.7;
+    cv::Vec3d grey;
+    for (int c = 0; c < 3; ++c) grey[c] = 255 * linearToSrgb(kLiquidShare * srgbToLinear(kBackdrop[c] / 255));
+    // The disc's right edge runs from 2 px short of the band (first frame with liquid) into it.
+    const cv::Rect band(90, 68, 40, 16);
+    const fs::path video = dir / "grey.mp4";
+    cv::VideoWriter writer(video.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), kFps, {160, 120});
+    ASSERT_TRUE(writer.isOpened());
+    std::vector<cv::Mat1b> truth(kCount);
+    cv::Mat1b unused;
+    const cv::Mat3b backdrop = antialiasedFrame(-1000, unused);
+    for (int f = 0; f < kCount; ++f)
+        writer.write(f < kEmpty ? backdrop : antialiasedFrame(f, truth[f], grey, band, kShade));
+    writer.release();
+
+    ExtractionOptions options;
+    options.backgroundFrames = kEmpty;
+    const ReferenceManifest manifest = extractSilhouettes(video, options, dir / "out");
+    double extracted = 0, covered = 0, shadeTaken = 0, shadeFree = 0;
+    for (int f = kEmpty; f < kCount; ++f) {
+        const cv::Mat1b mask = manifest.mask(f);
+        extracted += cv::countNonZero(mask);
+        covered += cv::countNonZero(truth[f]);
+        const cv::Mat1b shadeOnly = truth[f](band) == 0;
+        shadeTaken += cv::countNonZero(mask(band) & shadeOnly);
+        shadeFree += cv::countNonZero(shadeOnly);
+    }
+    std::printf("[ figures  ] translucent grey liquid: extracted area / half-covered area %.4f; %.4f of the shadow "
+                "beside it extracted\n", extracted / covered, shadeTaken / shadeFree);
+    EXPECT_NEAR(extracted / covered, 1.0, 0.03);
+    EXPECT_LT(shadeTaken / shadeFree, 0.02);
 }
 
 TEST(Extraction, CancelLeavesNoManifest) {

@@ -65,7 +65,8 @@ struct ExtractionOptions {
     // Edge pixels the liquid covers less than this share of are dropped (0 = keep MOG2's outline).
     // MOG2 flags a pixel the outline only grazes (≈ 10 % covered), while a simulated silhouette holds
     // the pixels whose centre is inside, i.e. about half covered: without this the reference is
-    // ~0.4 px fatter on every side, which biases η low (see extract.cpp).
+    // ~0.4 px fatter on every side, which biases η low (see extract.cpp). With it, pixels MOG2 calls
+    // shadows that touch the liquid are tested too: a translucent liquid's edge reads as one.
     double edgeCoverage = 0.5;
     int closeKernel = 5;  // morphological closing, then opening; elliptic kernel diameters in px
     // Off by default: an opening also erases what is thinner than its kernel, a 2-px stream or a
