@@ -219,3 +219,35 @@ TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
         EXPECT_LT(std::abs(reach(c, flowed8) - fromSeeded), oneCellFilm(c) ? 0.2 : 0.1) << flowed8.name << ", " << c.name;
     }
 }
+
+// The density is summed tile by tile, so liquid far apart costs its own tiles only: one box around
+// both of these drops, 20 m apart along each axis at 1 mm voxels, would hold 8·10¹² floats.
+TEST(LiquidLevelSet, DropsFarApartCostOnlyTheirOwnTiles) {
+    const double dx = 0.004, smoothing = kSurfaceSmoothingPerCell * dx, volume = std::pow(dx, 3) / 8;
+    std::mt19937 random(5);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::vector<Eigen::Vector3d> drop;
+    for (int i = -4; i < 4; ++i)
+        for (int j = -4; j < 4; ++j)
+            for (int k = -4; k < 4; ++k)
+                for (int s = 0; s < 8; ++s) {
+                    const Eigen::Vector3d x = Eigen::Vector3d(i, j, k) +
+                                              (Eigen::Vector3d(s % 2, (s / 2) % 2, s / 4) +
+                                               Eigen::Vector3d(unit(random), unit(random), unit(random))) / 2;
+                    if (x.norm() <= 3) drop.push_back(x * dx);
+                }
+    const Eigen::Vector3d apart = Eigen::Vector3d::Constant(20.0);
+    std::vector<Eigen::Vector3d> both = drop;
+    for (const Eigen::Vector3d& x : drop) both.push_back(x + apart);
+    const double voxel = surface::surfaceVoxelSize(smoothing);
+    const auto one = surface::liquidLevelSet(drop, volume, smoothing, voxel);
+    openvdb::FloatGrid::Ptr two;
+    ASSERT_NO_THROW(two = surface::liquidLevelSet(both, volume, smoothing, voxel));
+    EXPECT_NEAR(double(two->activeVoxelCount()) / double(one->activeVoxelCount()), 2.0, 0.04);
+    const openvdb::tools::GridSampler<openvdb::FloatGrid, openvdb::tools::BoxSampler> phi(*two);
+    const auto at = [&](const Eigen::Vector3d& x) { return phi.wsSample(openvdb::Vec3d(x.x(), x.y(), x.z())); };
+    EXPECT_LT(at(Eigen::Vector3d::Zero()), 0);
+    EXPECT_LT(at(apart), 0);
+    EXPECT_GT(at(apart / 2), 0);
+    EXPECT_GT(at(Eigen::Vector3d(4 * dx, 0, 0)), 0);  // beyond the drop's 3-cell radius
+}
