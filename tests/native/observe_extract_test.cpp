@@ -152,9 +152,9 @@ const cv::Vec3d kBackdrop(200, 196, 190), kHoney(25, 85, 160);  // BGR, sRGB-enc
 // A disc and a thin stream that move by fractions of a pixel, as a camera sees them: each pixel
 // mixes liquid and backdrop in linear light by the share of it the shapes cover (8 × 8 samples),
 // then the picture is sRGB-encoded, noised and compressed. `covered` gets the pixels ≥ half covered.
-// `shade` darkens, as a cast shadow would, a band beside the disc that ends where the disc begins.
+// Inside `shadow` the backdrop's light is scaled by `shade`, as a cast shadow would scale it.
 cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered, const cv::Vec3d& liquid = kHoney,
-                           const std::optional<cv::Rect>& shadeBeside = std::nullopt, double shade = 1.0) {
+                           const std::optional<cv::Rect>& shadow = std::nullopt, double shade = 1.0) {
     constexpr int kW = 160, kH = 120, kSub = 8;
     const double cx = 70 + 0.37 * frame, cy = 75 + 0.21 * frame, radius = 14.3 + 0.4 * frame;
     const double streamLeft = 77.3 + 0.13 * frame, streamWidth = 2.6;
@@ -172,7 +172,7 @@ cv::Mat3b antialiasedFrame(int frame, cv::Mat1b& covered, const cv::Vec3d& liqui
                 }
             const double alpha = inside / double(kSub * kSub);
             covered(row, col) = alpha >= 0.5 ? 255 : 0;
-            const bool shaded = shadeBeside && shadeBeside->contains({col, row});
+            const bool shaded = shadow && shadow->contains({col, row});
             for (int c = 0; c < 3; ++c) {
                 const double backdrop = srgbToLinear(kBackdrop[c] / 255) * (shaded ? shade : 1.0);
                 const double light = alpha * srgbToLinear(liquid[c] / 255) + (1 - alpha) * backdrop;
@@ -247,19 +247,19 @@ TEST(Extraction, ATranslucentLiquidsEdgeIsLiquidAndTheShadowBesideItIsNot) {
     ExtractionOptions options;
     options.backgroundFrames = kEmpty;
     const ReferenceManifest manifest = extractSilhouettes(video, options, dir / "out");
-    double extracted = 0, covered = 0, shadeTaken = 0, shadeFree = 0;
+    double extracted = 0, covered = 0, shadowExtracted = 0, shadowArea = 0;
     for (int f = kEmpty; f < kCount; ++f) {
         const cv::Mat1b mask = manifest.mask(f);
         extracted += cv::countNonZero(mask);
         covered += cv::countNonZero(truth[f]);
-        const cv::Mat1b shadeOnly = truth[f](band) == 0;
-        shadeTaken += cv::countNonZero(mask(band) & shadeOnly);
-        shadeFree += cv::countNonZero(shadeOnly);
+        const cv::Mat1b shadowOnly = truth[f](band) == 0;  // not half covered by the liquid
+        shadowExtracted += cv::countNonZero(mask(band) & shadowOnly);
+        shadowArea += cv::countNonZero(shadowOnly);
     }
     std::printf("[ figures  ] translucent grey liquid: extracted area / half-covered area %.4f; %.4f of the shadow "
-                "beside it extracted\n", extracted / covered, shadeTaken / shadeFree);
+                "beside it extracted\n", extracted / covered, shadowExtracted / shadowArea);
     EXPECT_NEAR(extracted / covered, 1.0, 0.03);
-    EXPECT_LT(shadeTaken / shadeFree, 0.02);
+    EXPECT_LT(shadowExtracted / shadowArea, 0.02);
 }
 
 TEST(Extraction, CancelLeavesNoManifest) {
