@@ -81,8 +81,11 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
             for (int i = lo.x(); i <= hi.x(); ++i)
                 for (int j = lo.y(); j <= hi.y(); ++j) {
                     const double wij = norm * weight[i] * weight[width + j];
-                    float* row = &density.getValue(first.offsetBy(i, j, 0));
-                    for (int k = lo.z(); k <= hi.z(); ++k) row[k] += static_cast<float>(wij * weight[2 * width + k]);
+                    // The row from its first voxel inside the box: a pointer before it may lie
+                    // outside the box's array.
+                    float* row = &density.getValue(first.offsetBy(i, j, lo.z()));
+                    for (int k = lo.z(); k <= hi.z(); ++k)
+                        row[k - lo.z()] += static_cast<float>(wij * weight[2 * width + k]);
                 }
         }
         // Near the half level, (½ − ρ)/|∇ρ| is the distance to it to first order, which is all a
