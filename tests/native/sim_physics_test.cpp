@@ -157,6 +157,36 @@ TEST(Physics, FreeFallingBlobAcceleratesAtG) {
     EXPECT_NEAR(meanVz / expected, 1.0, 0.005);
 }
 
+// 1a'. A lone particle that falls onto the ground comes to rest there. Alone it is too little
+// liquid for any cell to enter the solve (W = 0 everywhere), so nothing but the ground's push
+// holds it. It falls from 3 cells up (impact speed √(2 g h) = 0.38 m/s) and lies on the ground
+// for the rest of the second. Before the push also stopped its motion into the ground, it kept
+// gaining speed there: 0.28 m/s downward at 0.5 s, 0.51 m/s at 1 s, with 5 steps in the last frame.
+TEST(Physics, LoneDropletComesToRestOnTheGround) {
+    json doc = baseScene(300.0, 16);
+    doc["solids"] = json::array({{{"type", "ground"}, {"height", 0.0}}});
+    doc["liquids"].push_back({{"type", "box"}, {"min", {0.01, 0.01, 0.01}}, {"max", {0.03, 0.03, 0.03}}});
+    doc["frames"] = 30;
+    sim::Simulation s(parseScene(doc, "lone droplet"));
+    const double dx = s.grid().dx;
+    sim::Particles& p = s.particles();
+    p.position.assign(1, Vec3(0.02, 0.02, 3 * dx));
+    p.velocity.assign(1, Vec3::Zero());
+    p.affine.assign(1, Eigen::Matrix3d::Zero());
+    double fastestLastHalf = 0;
+    int stepsLastFrame = 0;
+    for (int f = 0; f < 30; ++f) {
+        stepsLastFrame = s.advanceFrame().steps;
+        if (f >= 15) fastestLastHalf = std::max(fastestLastHalf, maxParticleSpeed(s));
+    }
+    const Vec3 x = s.particles().position[0];
+    std::printf("lone droplet on the ground: height %.3f cells, fastest over the last 0.5 s %.3f m/s, "
+                "%d steps in the last frame\n", x.z() / dx, fastestLastHalf, stepsLastFrame);
+    EXPECT_GE(x.z(), 0.0);
+    EXPECT_LT(x.z(), dx);
+    EXPECT_LT(fastestLastHalf, std::sqrt(2 * 9.81 * 3 * dx));  // slower than it hit the ground
+}
+
 // 1b. Surface tension's strength: a drop at rest in zero gravity carries the Laplace pressure
 // 2σ/R inside. Read from the pressure of the cells deep inside (they hold it once the solve has
 // balanced the surface's push) against R from the liquid volume the grid measures. Claimed: within
