@@ -37,8 +37,8 @@ class VISCOSCOPE_OT_simulate(EngineOperator, bpy.types.Operator):
         folder = transfer_dir(scene)
         out_dir = os.path.join(folder, "out")
         os.makedirs(out_dir, exist_ok=True)
-        for _n, stale in cup_mesh.frame_files(out_dir):
-            os.remove(stale)
+        # The engine resumes a cancelled run of the same scene from out_dir, and removes the frames
+        # of any other run before it starts over.
         scene_path = os.path.join(folder, "scene.json")
         scene_export.export_scene(scene, scene_path)
         return engine.simulate_args(exe, scene_path, out_dir, prefs.threads(context)), out_dir

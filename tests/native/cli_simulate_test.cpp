@@ -1,5 +1,5 @@
 // `viscoscope simulate` as a user runs it: a small scene end to end, bad scenes (exit 2 with one
-// line naming the field), and cancellation by SIGTERM (exit 3, no completion marker).
+// line naming the field), cancellation by SIGTERM (exit 3, no completion marker) and resuming.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -115,25 +115,77 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
     EXPECT_NE(r.stderrText.find("absent.json"), std::string::npos);
 }
 
-TEST_F(SimulateCommand, SigtermStopsCleanlyWithExitThree) {
-    json scene = smallScene();
-    scene["frames"] = 100000;
-    const std::string scenePath = write(scene).string(), out = (dir_ / "out").string();
+namespace {
+
+// Runs `simulate` into `out` and sends it SIGTERM once `marker` exists; returns its exit code.
+int simulateUntil(const std::string& scenePath, const fs::path& out, const fs::path& marker) {
     const pid_t pid = ::fork();
-    ASSERT_GE(pid, 0);
+    if (pid < 0) return -1;
     if (pid == 0) {
         ::execl(VISCOSCOPE_CLI, VISCOSCOPE_CLI, "simulate", scenePath.c_str(), "--out", out.c_str(),
                 "--progress", "none", static_cast<char*>(nullptr));
         ::_exit(127);
     }
-    // Wait until some frames exist, then cancel.
-    for (int i = 0; i < 600 && !fs::exists(dir_ / "out/particles_00002.bin"); ++i)
-        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    for (int i = 0; i < 600 && !fs::exists(marker); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
     ::kill(pid, SIGTERM);
     int status = 0;
     ::waitpid(pid, &status, 0);
-    ASSERT_TRUE(WIFEXITED(status));
-    EXPECT_EQ(WEXITSTATUS(status), 3);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string fileBytes(const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+TEST_F(SimulateCommand, SigtermStopsCleanlyWithExitThree) {
+    json scene = smallScene();
+    scene["frames"] = 100000;
+    EXPECT_EQ(simulateUntil(write(scene).string(), dir_ / "out", dir_ / "out/particles_00002.bin"), 3);
     EXPECT_TRUE(fs::exists(dir_ / "out/particles_00002.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "out/simulation.json"));
+    EXPECT_TRUE(fs::exists(dir_ / "out/resume.state"));
+}
+
+// Run again after a cancel, the same scene goes on from the frame it reached and ends with every
+// frame's particles byte for byte those of a run that was never stopped. Another scene starts
+// over and leaves none of the first run's frames behind.
+TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
+    json scene = smallScene();
+    scene["frames"] = 16;
+    const std::string scenePath = write(scene).string();
+    ASSERT_EQ(runViscoscope("simulate " + scenePath + " --out " + (dir_ / "whole").string(), dir_).exitCode, 0);
+    ASSERT_EQ(simulateUntil(scenePath, dir_ / "cut", dir_ / "cut/particles_00003.bin"), 3);
+    ASSERT_TRUE(fs::exists(dir_ / "cut/resume.state"));
+    const Result r = runViscoscope("simulate " + scenePath + " --out " + (dir_ / "cut").string(), dir_);
+    ASSERT_EQ(r.exitCode, 0) << r.stderrText;
+    json summary;
+    std::ifstream(dir_ / "cut/simulation.json") >> summary;
+    const int resumedFrom = summary.value("resumed_from_frame", -1);
+    std::printf("cut at frame %d of 16, resumed\n", resumedFrom);
+    EXPECT_GE(resumedFrom, 3);
+    EXPECT_LT(resumedFrom, 16);
+    EXPECT_EQ(summary["frames"].size(), 16u);
+    EXPECT_FALSE(fs::exists(dir_ / "cut/resume.state"));
+    for (int f = 0; f <= 16; ++f) {
+        char name[32];
+        std::snprintf(name, sizeof name, "particles_%05d.bin", f);
+        const std::string whole = fileBytes(dir_ / "whole" / name);
+        EXPECT_FALSE(whole.empty()) << name;
+        EXPECT_TRUE(whole == fileBytes(dir_ / "cut" / name)) << name << " differs from the uninterrupted run's";
+    }
+
+    json shorter = smallScene();
+    shorter["frames"] = 100000;
+    ASSERT_EQ(simulateUntil(write(shorter).string(), dir_ / "other", dir_ / "other/particles_00003.bin"), 3);
+    shorter["frames"] = 2;
+    shorter["material"]["viscosity"] = 50.0;
+    const Result again = runViscoscope("simulate " + write(shorter).string() + " --out " + (dir_ / "other").string(), dir_);
+    ASSERT_EQ(again.exitCode, 0) << again.stderrText;
+    EXPECT_NE(again.stderrText.find("another scene; starting over"), std::string::npos) << again.stderrText;
+    EXPECT_TRUE(fs::exists(dir_ / "other/particles_00002.bin"));
+    EXPECT_FALSE(fs::exists(dir_ / "other/particles_00003.bin"));
+    EXPECT_FALSE(fs::exists(dir_ / "other/resume.state"));
 }

@@ -1,5 +1,7 @@
 // `viscoscope simulate scene.json --out DIR`: runs the forward model and writes per-frame files
 // (see surface/surface.h). DIR/simulation.json is written last, so its presence marks a complete run.
+// A run that stops early (cancelled, killed) leaves DIR/resume.state; running the same scene into
+// DIR again goes on from it.
 #include "cli/simulation_folder.h"
 
 #include "cli/commands.h"
@@ -9,12 +11,21 @@
 #include <nlohmann/json.hpp>
 
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <optional>
+#include <regex>
 
 namespace viscoscope::cli {
+
+std::string frameName(const char* prefix, int frame, const char* ext) {
+    char name[64];
+    std::snprintf(name, sizeof name, "%s_%05d.%s", prefix, frame, ext);
+    return name;
+}
 
 namespace {
 
@@ -40,13 +51,81 @@ void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& 
     }
 }
 
-}  // namespace
+using Clock = std::chrono::steady_clock;
 
-std::string frameName(const char* prefix, int frame, const char* ext) {
-    char name[64];
-    std::snprintf(name, sizeof name, "%s_%05d.%s", prefix, frame, ext);
-    return name;
+// The state is saved after a frame once this long has passed since the last save, and when the
+// run is cancelled: at 96³ it is about 0.1 GB, whose writing a frame every few seconds would feel.
+constexpr double kResumeSaveInterval = 60;  // s
+const char* const kResumeFile = "resume.state";
+
+// What the run has done so far besides the simulation's own state: resume.state holds it as a
+// JSON header before Simulation::saveState's bytes.
+struct RunRecord {
+    nlohmann::json scene;  // sceneToJson of the scene it ran
+    nlohmann::json frames = nlohmann::json::array();
+    double initialVolume = 0;
+    double wallSeconds = 0;  // before this process
+};
+
+void saveResumeState(const std::filesystem::path& dir, const RunRecord& record, double wallSeconds,
+                     const sim::Simulation& simulation) {
+    const nlohmann::json header{{"format", "viscoscope.resume"}, {"version", 1}, {"scene", record.scene},
+                                {"frames", record.frames}, {"initial_volume", record.initialVolume},
+                                {"wall_seconds", wallSeconds}};
+    const std::string text = header.dump();
+    const std::filesystem::path partial = dir / (std::string(kResumeFile) + ".partial");
+    {
+        std::ofstream out(partial, std::ios::binary);
+        const uint64_t length = text.size();
+        out.write(reinterpret_cast<const char*>(&length), sizeof length);
+        out << text;
+        simulation.saveState(out);
+        if (!out) throw std::runtime_error(partial.string() + ": cannot write");
+    }
+    std::filesystem::rename(partial, dir / kResumeFile);  // a kill mid-write leaves the last one whole
 }
+
+// The record of the run DIR/resume.state continues, with `simulation` restored to its last frame;
+// nothing when there is none, or when it is of another scene or unreadable (said in a warning).
+std::optional<RunRecord> resumeRun(const std::filesystem::path& dir, const Scene& scene,
+                                   sim::Simulation& simulation, const ProgressReporter& progress) {
+    const std::filesystem::path file = dir / kResumeFile;
+    std::ifstream in(file, std::ios::binary);
+    if (!in) return std::nullopt;
+    try {
+        uint64_t length = 0;
+        std::string text;
+        if (in.read(reinterpret_cast<char*>(&length), sizeof length) && length < (uint64_t(1) << 32)) {
+            text.resize(length);
+            in.read(text.data(), std::streamsize(length));
+        }
+        const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
+        if (header.is_discarded() || header.value("format", "") != "viscoscope.resume")
+            throw InputError("not a resume file");
+        RunRecord record{header.at("scene"), header.at("frames"), header.at("initial_volume").get<double>(),
+                         header.at("wall_seconds").get<double>()};
+        if (record.scene.dump() != sceneToJson(scene).dump()) {
+            progress.warn(file.string() + " is of another scene; starting over");
+            return std::nullopt;
+        }
+        simulation.restoreState(in);
+        return record;
+    } catch (const std::exception& e) {
+        progress.warn(file.string() + ": cannot resume from it (" + e.what() + "); starting over");
+        return std::nullopt;
+    }
+}
+
+// The frame files a previous run left in DIR: a run that starts over removes them, so that none
+// passes for one of its own.
+void removeFrameFiles(const std::filesystem::path& dir) {
+    static const std::regex frameFile(R"((frame_\d{5}\.(vdb|obj))|(particles_\d{5}\.bin))");
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(dir, ec))
+        if (std::regex_match(entry.path().filename().string(), frameFile)) std::filesystem::remove(entry.path(), ec);
+}
+
+}  // namespace
 
 int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress) {
     for (const std::string& warning : resolutionWarnings(scene)) progress.warn(warning);
@@ -55,9 +134,8 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     if (ec) throw InputError(dir.string() + ": cannot create output folder (" + ec.message() + ")");
     std::filesystem::remove(dir / "simulation.json", ec);
 
-    const auto start = std::chrono::steady_clock::now();
+    const auto start = Clock::now();
     sim::Simulation simulation(scene);
-    const double initialVolume = simulation.liquidVolume();
     nlohmann::json holes = nlohmann::json::array();
     for (const sim::HoleCalibration& hole : simulation.holeCalibrations()) {
         holes.push_back({{"solid", hole.solid}, {"resistance", hole.resistance}, {"grid_flux_vs_dagan", hole.gridFlux},
@@ -66,39 +144,62 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
                          {"resistance", hole.resistance}, {"grid_flux_vs_dagan", hole.gridFlux},
                          {"calibrated_flux_vs_dagan", hole.calibratedFlux}});
     }
-    writeFrame(simulation, dir);
+    std::optional<RunRecord> resumed = resumeRun(dir, scene, simulation, progress);
+    RunRecord record;
+    if (resumed) {
+        record = std::move(*resumed);
+        progress.report({{"event", "resumed"}, {"stage", "simulate"}, {"frame", simulation.frame()},
+                         {"frames", scene.frames}});
+    } else {
+        record.scene = sceneToJson(scene);
+        record.initialVolume = simulation.liquidVolume();
+        std::filesystem::remove(dir / kResumeFile, ec);  // an older run's must not outlive these frames
+        removeFrameFiles(dir);
+        writeFrame(simulation, dir);
+    }
+    const auto wallSeconds = [&] {
+        return record.wallSeconds + std::chrono::duration<double>(Clock::now() - start).count();
+    };
 
-    nlohmann::json frames = nlohmann::json::array();
-    for (int f = 0; f < scene.frames; ++f) {
+    const int firstFrame = simulation.frame();
+    auto lastSave = Clock::now();
+    for (int f = firstFrame; f < scene.frames; ++f) {
         const sim::FrameStats stats = simulation.advanceFrame();
         writeFrame(simulation, dir);
-        const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-        const nlohmann::json record = {
-            {"frame", stats.frame},        {"time", stats.simulatedTime},
-            {"steps", stats.steps},        {"solver_iterations", stats.solverIterations},
-            {"volume", stats.liquidVolume}, {"max_speed", stats.maxSpeed},
-            {"converged", stats.converged},
-            {"seconds", {{"transfer", stats.transferSeconds}, {"solve", stats.solveSeconds}, {"other", stats.otherSeconds}}}};
-        frames.push_back(record);
+        const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+        record.frames.push_back(
+            {{"frame", stats.frame},        {"time", stats.simulatedTime},
+             {"steps", stats.steps},        {"solver_iterations", stats.solverIterations},
+             {"volume", stats.liquidVolume}, {"max_speed", stats.maxSpeed},
+             {"converged", stats.converged},
+             {"seconds", {{"transfer", stats.transferSeconds}, {"solve", stats.solveSeconds}, {"other", stats.otherSeconds}}}});
         progress.report({{"event", "progress"}, {"stage", "simulate"}, {"frame", stats.frame}, {"frames", scene.frames},
                          {"time", stats.simulatedTime}, {"steps", stats.steps},
                          {"iterations", stats.solverIterations}, {"volume", stats.liquidVolume},
-                         {"elapsed", elapsed}, {"eta", elapsed / (f + 1) * (scene.frames - f - 1)}});
+                         {"elapsed", elapsed}, {"eta", elapsed / (f + 1 - firstFrame) * (scene.frames - f - 1)}});
+        const bool last = f + 1 == scene.frames;
+        if (!last && (g_cancelRequested ||
+                      std::chrono::duration<double>(Clock::now() - lastSave).count() >= kResumeSaveInterval)) {
+            saveResumeState(dir, record, wallSeconds(), simulation);
+            lastSave = Clock::now();
+        }
         if (g_cancelRequested) {
             progress.report({{"event", "cancelled"}, {"stage", "simulate"}, {"frame", stats.frame}});
             return kExitCancelled;
         }
     }
-    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double drift = initialVolume > 0 ? simulation.liquidVolume() / initialVolume - 1 : 0;
-    const nlohmann::json summary = {{"format", "viscoscope.simulation"}, {"version", 1},
-                                    {"scene", sceneToJson(scene)}, {"frames", frames},
-                                    {"initial_volume", initialVolume}, {"volume_drift", drift},
-                                    {"hole_calibrations", holes},
-                                    {"wall_seconds", elapsed}};
+    const double drift = record.initialVolume > 0 ? simulation.liquidVolume() / record.initialVolume - 1 : 0;
+    nlohmann::json summary = {{"format", "viscoscope.simulation"}, {"version", 1},
+                              {"scene", record.scene}, {"frames", record.frames},
+                              {"initial_volume", record.initialVolume}, {"volume_drift", drift},
+                              {"hole_calibrations", holes},
+                              {"wall_seconds", wallSeconds()}};
+    if (resumed) summary["resumed_from_frame"] = firstFrame;
     std::ofstream(dir / "simulation.json.tmp") << summary.dump(1);
     std::filesystem::rename(dir / "simulation.json.tmp", dir / "simulation.json");
-    progress.report({{"event", "done"}, {"stage", "simulate"}, {"frames", scene.frames}, {"elapsed", elapsed},
+    std::filesystem::remove(dir / kResumeFile, ec);
+    progress.report({{"event", "done"}, {"stage", "simulate"}, {"frames", scene.frames},
+                     {"elapsed", std::chrono::duration<double>(Clock::now() - start).count()},
                      {"volume_drift", drift}});
     return kExitOk;
 }

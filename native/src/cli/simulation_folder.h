@@ -16,6 +16,9 @@ std::string frameName(const char* prefix, int frame, const char* ext);
 // reached, then DIR/simulation.json last, so that its presence marks a complete run. Progress events
 // say "stage": "simulate". Returns kExitOk, or kExitCancelled once g_cancelRequested is raised (the
 // frames written so far stay). Throws InputError when `dir` cannot be created.
+// Until the run completes, DIR/resume.state holds its state as of a recent frame (saved every
+// minute and on cancelling); a run of the same scene into `dir` goes on from there bit for bit,
+// and one of another scene starts over and first removes the frame files it finds.
 int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress);
 
 }  // namespace viscoscope::cli

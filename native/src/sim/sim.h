@@ -12,6 +12,7 @@
 #include <openvdb/openvdb.h>
 
 #include <filesystem>
+#include <iosfwd>
 #include <memory>
 #include <optional>
 #include <random>
@@ -139,7 +140,18 @@ public:
     // One per cup with a hole, when scene().solver.holeConductance is Dagan.
     const std::vector<HoleCalibration>& holeCalibrations() const { return holeCalibrations_; }
 
+    // Everything a run carries from one frame to the next (particles, clock, random stream, the
+    // solve's last fields as its next start), in binary. A simulation of the same scene that
+    // restores it, between frames, goes on bit for bit as this one would have: `simulate` and
+    // `synth` resume from it. restoreState throws InputError when `in` is not such a state of a
+    // simulation on this one's grid.
+    void saveState(std::ostream& out) const;
+    void restoreState(std::istream& in);
+
 private:
+    // The fields saveState writes besides the particles, in its order.
+    template <class Self, class Visit>
+    static void forEachCarriedField(Self& self, Visit&& visit);
     // The calibration of `cup`'s hole on `grid`'s lattice, cached per hole and lattice placement.
     static HoleCalibration calibrateHole(const CupSolid& cup, const Grid& grid, const SolverSettings& solver);
     void setHoleResistance(const CupSolid& cup, double resistance);
