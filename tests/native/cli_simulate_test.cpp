@@ -1,5 +1,7 @@
 // `viscoscope simulate` as a user runs it: a small scene end to end, bad scenes (exit 2 with one
 // line naming the field), cancellation by SIGTERM (exit 3, no completion marker) and resuming.
+#include "cli_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -133,11 +135,6 @@ int simulateUntil(const std::string& scenePath, const fs::path& out, const fs::p
     return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-std::string fileBytes(const fs::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
 }  // namespace
 
 TEST_F(SimulateCommand, SigtermStopsCleanlyWithExitThree) {
@@ -172,9 +169,9 @@ TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
     for (int f = 0; f <= 16; ++f) {
         char name[32];
         std::snprintf(name, sizeof name, "particles_%05d.bin", f);
-        const std::string whole = fileBytes(dir_ / "whole" / name);
+        const std::string whole = viscoscope::cli_test::slurp(dir_ / "whole" / name);
         EXPECT_FALSE(whole.empty()) << name;
-        EXPECT_TRUE(whole == fileBytes(dir_ / "cut" / name)) << name << " differs from the uninterrupted run's";
+        EXPECT_TRUE(whole == viscoscope::cli_test::slurp(dir_ / "cut" / name)) << name << " differs from the uninterrupted run's";
     }
 
     json shorter = smallScene();

@@ -177,9 +177,8 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
                          {"time", stats.simulatedTime}, {"steps", stats.steps},
                          {"iterations", stats.solverIterations}, {"volume", stats.liquidVolume},
                          {"elapsed", elapsed}, {"eta", elapsed / (f + 1 - firstFrame) * (scene.frames - f - 1)}});
-        const bool last = f + 1 == scene.frames;
-        if (!last && (g_cancelRequested ||
-                      std::chrono::duration<double>(Clock::now() - lastSave).count() >= kResumeSaveInterval)) {
+        if (f + 1 == scene.frames) break;  // complete, even if cancelled just now
+        if (g_cancelRequested || std::chrono::duration<double>(Clock::now() - lastSave).count() >= kResumeSaveInterval) {
             saveResumeState(dir, record, wallSeconds(), simulation);
             lastSave = Clock::now();
         }

@@ -152,6 +152,7 @@ private:
     // The fields saveState writes besides the particles, in its order.
     template <class Self, class Visit>
     static void forEachCarriedField(Self& self, Visit&& visit);
+
     // The calibration of `cup`'s hole on `grid`'s lattice, cached per hole and lattice placement.
     static HoleCalibration calibrateHole(const CupSolid& cup, const Grid& grid, const SolverSettings& solver);
     void setHoleResistance(const CupSolid& cup, double resistance);

@@ -14,6 +14,7 @@ namespace {
 
 constexpr char kMagic[4] = {'V', 'S', 'S', 'T'};
 constexpr uint32_t kVersion = 1;
+constexpr uint64_t kMaxRandomText = 1 << 16;  // std::mt19937_64 writes 313 numbers, a few kB
 
 template <class T>
 void put(std::ostream& out, const T& value) {
@@ -99,21 +100,26 @@ void Simulation::restoreState(std::istream& in) {
     const double time = read.get<double>(), emitterDebt = read.get<double>();
     const bool hasVolumeTarget = read.get<uint8_t>() != 0;
     const double volumeTarget = read.get<double>();
-    std::string randomText(read.get<uint64_t>(), '\0');
+    const uint64_t randomLength = read.get<uint64_t>();
+    if (randomLength > kMaxRandomText) throw InputError("saved simulation state: damaged");
+    std::string randomText(randomLength, '\0');
     if (!in.read(randomText.data(), std::streamsize(randomText.size())))
         throw InputError("saved simulation state: truncated");
     std::mt19937_64 random;
-    std::istringstream(randomText) >> random;
+    if (!(std::istringstream(randomText) >> random)) throw InputError("saved simulation state: damaged");
 
+    // One particle at a time, so that a damaged count runs into the file's end, not out of memory.
     Particles particles;
     const uint64_t count = read.get<uint64_t>();
-    particles.position.resize(count);
-    particles.velocity.resize(count);
-    particles.affine.resize(count);
-    for (size_t p = 0; p < count; ++p) {
-        read.doubles(particles.position[p].data(), 3);
-        read.doubles(particles.velocity[p].data(), 3);
-        read.doubles(particles.affine[p].data(), 9);
+    for (uint64_t p = 0; p < count; ++p) {
+        Vec3 position, velocity;
+        Eigen::Matrix3d affine;
+        read.doubles(position.data(), 3);
+        read.doubles(velocity.data(), 3);
+        read.doubles(affine.data(), 9);
+        particles.position.push_back(position);
+        particles.velocity.push_back(velocity);
+        particles.affine.push_back(affine);
     }
     std::vector<std::vector<double>> fields;
     forEachCarriedField(*this, [&](const Field& field) {
