@@ -51,7 +51,8 @@ template <class Self, class Visit>
 void Simulation::forEachCarriedField(Self& self, Visit&& visit) {
     // The solve starts from its last pressure and stresses; surface tension and a shear-dependent
     // law's viscosities are read again before they are recomputed (the time step, the pressure
-    // the frame files report).
+    // the frame files report). The velocity is rebuilt from the particles at the next step; it is
+    // carried so that fields() and velocityAt() read after restoring are the saved run's.
     visit(self.state_.pressure);
     for (int a = 0; a < 3; ++a) {
         visit(self.state_.velocity[a]);
