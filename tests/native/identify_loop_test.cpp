@@ -124,9 +124,9 @@ protected:
 };
 fs::path IdentifyLoop::dir_;
 
-// A job that names a video extracts it into OUT/reference once and reuses that while the video
-// and the extraction settings stay the same; when either changes, it extracts again rather than
-// scoring against silhouettes of something else.
+// A job that names a video extracts it into OUT/reference once and reuses that while the video,
+// the extraction settings and the extraction's revision stay the same; when any changes, it extracts
+// again rather than scoring against silhouettes of something else.
 TEST_F(IdentifyLoop, AVideoReferenceIsExtractedAgainWhenItsSourceChanges) {
     const fs::path clip = dir_ / "clip.mp4", out = dir_ / "video_job_out";
     {
@@ -153,6 +153,16 @@ TEST_F(IdentifyLoop, AVideoReferenceIsExtractedAgainWhenItsSourceChanges) {
     EXPECT_EQ(prepared(doc).second, first.second) << "an unchanged source must be reused, not extracted again";
     doc["extraction"]["background_frames"] = 2;
     EXPECT_EQ(prepared(doc).first, 2) << "changed extraction settings must extract again";
+    // As an older engine's extraction would have recorded it:
+    const fs::path sourceFile = out / "reference" / "source.json";
+    json source = json::parse(std::ifstream(sourceFile));
+    ASSERT_EQ(source.at("extraction").at("revision"), kExtractionRevision);
+    source["extraction"]["revision"] = kExtractionRevision - 1;
+    std::ofstream(sourceFile) << source.dump(1);
+    const fs::path older = out / "reference" / "older_extraction";
+    std::ofstream(older) << "\n";
+    prepared(doc);
+    EXPECT_FALSE(fs::exists(older)) << "another extraction revision's masks must be extracted again";
     fs::remove_all(out);
 }
 

@@ -370,7 +370,8 @@ nlohmann::json extractionParameters(const ExtractionOptions& o) {
         for (const cv::Point2d& p : polygon) points.push_back({p.x, p.y});
         polygons.push_back(points);
     }
-    return {{"first", o.first},
+    return {{"revision", kExtractionRevision},
+            {"first", o.first},
             {"last", o.last},
             {"step", o.step},
             {"background", o.cleanPlate ? "clean_plate" : "leading_frames"},

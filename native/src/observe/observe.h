@@ -118,8 +118,13 @@ ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
 // references made by other means than `extract`, such as synthetic ones in tests and benchmarks.
 void saveReferenceManifest(const ReferenceManifest& manifest, const std::filesystem::path& directory);
 
-// Every option as manifest.json's "parameters" records it, defaults included: what identify compares
-// to tell whether silhouettes extracted earlier (perhaps by an engine with other defaults) still hold.
+// The extraction's revision: raise it whenever extract's masks change for the same options (as
+// af89b92's shadow handling did), so that identify extracts a video again instead of reusing masks
+// an older engine drew.
+inline constexpr int kExtractionRevision = 2;
+// Every option as manifest.json's "parameters" records it, defaults included, and the revision: what
+// identify compares to tell whether silhouettes extracted earlier (perhaps by an engine with other
+// defaults or another extraction) still hold.
 nlohmann::json extractionParameters(const ExtractionOptions& options);
 // ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
