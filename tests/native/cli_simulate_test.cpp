@@ -19,18 +19,11 @@ using nlohmann::json;
 
 namespace {
 
-struct Result {
-    int exitCode;
-    std::string stderrText;
-};
+using viscoscope::cli_test::CommandResult;
 
-Result runViscoscope(const std::string& arguments, const fs::path& dir) {
-    const fs::path err = dir / "stderr.txt";
-    const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " --progress none 2> " + err.string();
-    const int status = std::system(command.c_str());
-    std::ifstream in(err);
-    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    return {WEXITSTATUS(status), text};
+// `viscoscope simulate ARGUMENTS` without its progress lines.
+CommandResult simulate(const std::string& arguments, const fs::path& dir) {
+    return viscoscope::cli_test::runViscoscope("simulate " + arguments + " --progress none", dir);
 }
 
 json smallScene() {
@@ -61,11 +54,11 @@ protected:
 }  // namespace
 
 TEST_F(SimulateCommand, WritesEveryFrameAndASummary) {
-    const Result r = runViscoscope("simulate " + write(smallScene()).string() + " --out " + (dir_ / "out").string(), dir_);
-    ASSERT_EQ(r.exitCode, 0) << r.stderrText;
+    const CommandResult r = simulate(write(smallScene()).string() + " --out " + (dir_ / "out").string(), dir_);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
     // At 16³ the cup's hole spans 1.6 cells: the run goes on and says why its drain rate is wrong.
-    EXPECT_NE(r.stderrText.find("warning: solids[1] (cup): its hole is 1.6 cells across at resolution 16"),
-              std::string::npos) << r.stderrText;
+    EXPECT_NE(r.err.find("warning: solids[1] (cup): its hole is 1.6 cells across at resolution 16"),
+              std::string::npos) << r.err;
     for (int f = 0; f <= 2; ++f) {
         char name[32];
         std::snprintf(name, sizeof name, "frame_%05d.vdb", f);
@@ -95,26 +88,26 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
     for (const Case& c : cases) {
         json scene = smallScene();
         scene[json::json_pointer(c.pointer)] = c.value;
-        const Result r = runViscoscope("simulate " + write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+        const CommandResult r = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
         EXPECT_EQ(r.exitCode, 2) << c.pointer;
-        EXPECT_NE(r.stderrText.find(c.mentions), std::string::npos) << r.stderrText;
-        EXPECT_EQ(std::count(r.stderrText.begin(), r.stderrText.end(), '\n'), 1) << r.stderrText;
+        EXPECT_NE(r.err.find(c.mentions), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
         EXPECT_FALSE(fs::exists(dir_ / "out/simulation.json"));
     }
     // An empty domain: the liquid box lies entirely inside a solid.
     json scene = smallScene();
     scene["liquids"] = json::array({{{"type", "box"}, {"min", {-0.05, -0.05, -0.01}}, {"max", {0.05, 0.05, 0.0}}}});
     scene["solids"] = json::array({{{"type", "ground"}, {"height", 0.01}}});
-    Result r = runViscoscope("simulate " + write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
-    EXPECT_EQ(r.exitCode, 2) << r.stderrText;
-    EXPECT_NE(r.stderrText.find("liquids"), std::string::npos) << r.stderrText;
+    CommandResult r = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+    EXPECT_EQ(r.exitCode, 2) << r.err;
+    EXPECT_NE(r.err.find("liquids"), std::string::npos) << r.err;
 
     std::ofstream(dir_ / "broken.json") << "{ not json";
-    r = runViscoscope("simulate " + (dir_ / "broken.json").string() + " --out " + (dir_ / "out").string(), dir_);
+    r = simulate((dir_ / "broken.json").string() + " --out " + (dir_ / "out").string(), dir_);
     EXPECT_EQ(r.exitCode, 2);
-    r = runViscoscope("simulate " + (dir_ / "absent.json").string() + " --out " + (dir_ / "out").string(), dir_);
+    r = simulate((dir_ / "absent.json").string() + " --out " + (dir_ / "out").string(), dir_);
     EXPECT_EQ(r.exitCode, 2);
-    EXPECT_NE(r.stderrText.find("absent.json"), std::string::npos);
+    EXPECT_NE(r.err.find("absent.json"), std::string::npos);
 }
 
 namespace {
@@ -153,11 +146,11 @@ TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
     json scene = smallScene();
     scene["frames"] = 16;
     const std::string scenePath = write(scene).string();
-    ASSERT_EQ(runViscoscope("simulate " + scenePath + " --out " + (dir_ / "whole").string(), dir_).exitCode, 0);
+    ASSERT_EQ(simulate(scenePath + " --out " + (dir_ / "whole").string(), dir_).exitCode, 0);
     ASSERT_EQ(simulateUntil(scenePath, dir_ / "cut", dir_ / "cut/particles_00003.bin"), 3);
     ASSERT_TRUE(fs::exists(dir_ / "cut/resume.state"));
-    const Result r = runViscoscope("simulate " + scenePath + " --out " + (dir_ / "cut").string(), dir_);
-    ASSERT_EQ(r.exitCode, 0) << r.stderrText;
+    const CommandResult r = simulate(scenePath + " --out " + (dir_ / "cut").string(), dir_);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
     json summary;
     std::ifstream(dir_ / "cut/simulation.json") >> summary;
     const int resumedFrom = summary.value("resumed_from_frame", -1);
@@ -179,9 +172,9 @@ TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
     ASSERT_EQ(simulateUntil(write(shorter).string(), dir_ / "other", dir_ / "other/particles_00003.bin"), 3);
     shorter["frames"] = 2;
     shorter["material"]["viscosity"] = 50.0;
-    const Result again = runViscoscope("simulate " + write(shorter).string() + " --out " + (dir_ / "other").string(), dir_);
-    ASSERT_EQ(again.exitCode, 0) << again.stderrText;
-    EXPECT_NE(again.stderrText.find("another scene; starting over"), std::string::npos) << again.stderrText;
+    const CommandResult again = simulate(write(shorter).string() + " --out " + (dir_ / "other").string(), dir_);
+    ASSERT_EQ(again.exitCode, 0) << again.err;
+    EXPECT_NE(again.err.find("another scene; starting over"), std::string::npos) << again.err;
     EXPECT_TRUE(fs::exists(dir_ / "other/particles_00002.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "other/particles_00003.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "other/resume.state"));
