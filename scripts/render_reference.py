@@ -9,6 +9,10 @@ render.json (written by native/src/cli/synth_command.cpp):
     ground_height   z of the ground plane, or null for none
     clean_plate     PNG path: the scene without liquid
     frames          [{"mesh": liquid surface OBJ, "image": PNG path}, ...]
+    simulation_digest  which run the meshes are from (the engine compares it; unused here)
+
+An image that is already there is not rendered again: the engine keeps those a cancelled synth of
+the same simulation and settings left, and removes all others first.
 
 The look is a plain studio shot: a grey backdrop, one sun, an opaque light cup, a mid-grey floor
 and honey-coloured liquid. Cycles without denoising, Standard view transform, so the noise and
@@ -16,6 +20,7 @@ tones are those of a plain camera, not of a filmic grade. Renders the clean plat
 """
 
 import json
+import os
 import sys
 
 import bpy
@@ -115,9 +120,13 @@ def main():
     with open(spec_file, encoding="utf-8") as fh:
         spec = json.load(fh)
     scene = set_up(spec)
-    render(scene, spec["clean_plate"])
+    # An image already there was kept by the engine from a cancelled synth of the same simulation.
+    if not os.path.exists(spec["clean_plate"]):
+        render(scene, spec["clean_plate"])
     honey = principled("honey", (0.12, 0.05, 0.01), 0.6)
     for frame in spec["frames"]:
+        if os.path.exists(frame["image"]):
+            continue
         liquid = add_mesh(scene, "liquid", frame["mesh"], honey)
         render(scene, frame["image"])
         mesh = liquid.data

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <csignal>
+#include <fcntl.h>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -112,11 +113,15 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
 
 namespace {
 
-// Runs `simulate` into `out` and sends it SIGTERM once `marker` exists; returns its exit code.
+// Runs `simulate` into `out`, its stderr into OUT.stderr, and sends it SIGTERM once `marker`
+// exists; returns its exit code.
 int simulateUntil(const std::string& scenePath, const fs::path& out, const fs::path& marker) {
+    const std::string errFile = out.string() + ".stderr";
     const pid_t pid = ::fork();
     if (pid < 0) return -1;
     if (pid == 0) {
+        const int err = ::open(errFile.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (err >= 0) ::dup2(err, 2);
         ::execl(VISCOSCOPE_CLI, VISCOSCOPE_CLI, "simulate", scenePath.c_str(), "--out", out.c_str(),
                 "--progress", "none", static_cast<char*>(nullptr));
         ::_exit(127);
@@ -178,4 +183,45 @@ TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
     EXPECT_TRUE(fs::exists(dir_ / "other/particles_00002.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "other/particles_00003.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "other/resume.state"));
+}
+
+// A completed run of the same scene by the same engine build is kept as it is (it would come out
+// bit for bit the same); a missing frame file or another build's run is simulated again, and so is
+// a cut run whose resume state another build wrote.
+TEST_F(SimulateCommand, ACompletedRunIsKeptUnlessAFrameOrTheEngineBuildDiffers) {
+    const std::string scenePath = write(smallScene()).string(), out = " --out " + (dir_ / "out").string();
+    ASSERT_EQ(simulate(scenePath + out, dir_).exitCode, 0);
+    const std::string completed = viscoscope::cli_test::slurp(dir_ / "out/simulation.json");
+    const std::string build = json::parse(completed).at("engine_build");
+    ASSERT_EQ(build.size(), 16u);
+
+    ASSERT_EQ(simulate(scenePath + out, dir_).exitCode, 0);
+    EXPECT_EQ(viscoscope::cli_test::slurp(dir_ / "out/simulation.json"), completed) << "the completed run was redone";
+
+    fs::remove(dir_ / "out/particles_00001.bin");
+    ASSERT_EQ(simulate(scenePath + out, dir_).exitCode, 0);
+    EXPECT_TRUE(fs::exists(dir_ / "out/particles_00001.bin"));
+    const std::string redone = viscoscope::cli_test::slurp(dir_ / "out/simulation.json");
+    EXPECT_NE(redone, completed) << "a run missing a frame file was kept";
+
+    json summary = json::parse(redone);
+    summary["engine_build"] = std::string(16, '0');
+    std::ofstream(dir_ / "out/simulation.json") << summary.dump();
+    ASSERT_EQ(simulate(scenePath + out, dir_).exitCode, 0);
+    EXPECT_EQ(json::parse(viscoscope::cli_test::slurp(dir_ / "out/simulation.json")).at("engine_build"), build)
+        << "another build's run was kept";
+
+    json endless = smallScene();
+    endless["frames"] = 100000;
+    const std::string endlessPath = write(endless).string();
+    ASSERT_EQ(simulateUntil(endlessPath, dir_ / "cut", dir_ / "cut/particles_00002.bin"), 3);
+    std::string state = viscoscope::cli_test::slurp(dir_ / "cut/resume.state");
+    const size_t at = state.find(build);
+    ASSERT_NE(at, std::string::npos);
+    state.replace(at, build.size(), std::string(16, '0'));
+    std::ofstream(dir_ / "cut/resume.state", std::ios::binary) << state;
+    // (Frame 30 is beyond where the cut run stopped, so only the second run writes it.)
+    ASSERT_EQ(simulateUntil(endlessPath, dir_ / "cut", dir_ / "cut/particles_00030.bin"), 3);
+    const std::string err = viscoscope::cli_test::slurp(dir_ / "cut.stderr");
+    EXPECT_NE(err.find("another build of the engine; starting over"), std::string::npos) << err;
 }

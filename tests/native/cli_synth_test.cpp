@@ -170,7 +170,9 @@ TEST_F(CliSynth, ATinySynthMakesAClipThatExtractReadsBack) {
     EXPECT_GT(worst, 0.85);
 }
 
-TEST_F(CliSynth, SigtermWhileRenderingStopsBlenderAndExitsThree) {
+// Cancelled while Blender renders, synth exits 3 and Blender stops. Run again, it keeps the
+// simulation and the whole renders, renders the rest and completes.
+TEST_F(CliSynth, SigtermWhileRenderingStopsBlenderAndRunningAgainFinishesTheRest) {
     if (!blenderInstalled()) GTEST_SKIP() << "blender not installed";
     const std::string scene = write("scene.json", sceneJson(40).dump()).string();
     const std::string camera = write("camera.json", cameraJson().dump()).string();
@@ -201,6 +203,15 @@ TEST_F(CliSynth, SigtermWhileRenderingStopsBlenderAndExitsThree) {
     const int atExit = rendered();
     std::this_thread::sleep_for(std::chrono::seconds(2));
     EXPECT_EQ(rendered(), atExit);
+
+    const fs::path summary = dir_ / "out" / "simulation" / "simulation.json";
+    const auto simulated = fs::last_write_time(summary), firstRendered = fs::last_write_time(firstFrame);
+    const CommandResult again = run(synth(scene, camera, "--resolution 8 --samples 64"));
+    ASSERT_EQ(again.exitCode, 0) << again.err;
+    EXPECT_TRUE(fs::exists(dir_ / "out" / "synth.json"));
+    EXPECT_EQ(fs::last_write_time(summary), simulated) << "the completed simulation was run again";
+    EXPECT_EQ(fs::last_write_time(firstFrame), firstRendered) << "a whole render was rendered again";
+    EXPECT_EQ(rendered(), 42);  // the clean plate and frames 0–40
 }
 
 TEST_F(CliSynth, CompareGivesZeroForItselfAndNamesMissingFrames) {

@@ -1,7 +1,7 @@
 // `viscoscope simulate scene.json --out DIR`: runs the forward model and writes per-frame files
 // (see surface/surface.h). DIR/simulation.json is written last, so its presence marks a complete run.
 // A run that stops early (cancelled, killed) leaves DIR/resume.state; running the same scene into
-// DIR again goes on from it.
+// DIR again goes on from it; a completed one is kept.
 #include "cli/simulation_folder.h"
 
 #include "cli/commands.h"
@@ -18,6 +18,8 @@
 #include <iostream>
 #include <optional>
 #include <regex>
+#include <stdexcept>
+#include <vector>
 
 namespace viscoscope::cli {
 
@@ -27,7 +29,25 @@ std::string frameName(const char* prefix, int frame, const char* ext) {
     return name;
 }
 
+std::string fileDigest(const std::filesystem::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    if (!in) throw std::runtime_error(file.string() + ": cannot read");
+    std::uint64_t hash = 1469598103934665603ull;
+    std::vector<char> buffer(1 << 16);
+    while (in.read(buffer.data(), std::streamsize(buffer.size())) || in.gcount() > 0)
+        for (std::streamsize i = 0; i < in.gcount(); ++i) hash = (hash ^ static_cast<unsigned char>(buffer[i])) * 1099511628211ull;
+    char text[17];
+    std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(hash));
+    return text;
+}
+
 namespace {
+
+// The running engine's build: a run resumed or kept must be one this code would make.
+const std::string& engineBuild() {
+    static const std::string build = fileDigest("/proc/self/exe");
+    return build;
+}
 
 struct SimulateOptions {
     std::string scene;
@@ -69,7 +89,8 @@ struct RunRecord {
 
 void saveResumeState(const std::filesystem::path& dir, const RunRecord& record, double wallSeconds,
                      const sim::Simulation& simulation) {
-    const nlohmann::json header{{"format", "viscoscope.resume"}, {"version", 1}, {"scene", record.scene},
+    const nlohmann::json header{{"format", "viscoscope.resume"}, {"version", 1}, {"engine_build", engineBuild()},
+                                {"scene", record.scene},
                                 {"frames", record.frames}, {"initial_volume", record.initialVolume},
                                 {"wall_seconds", wallSeconds}};
     const std::string text = header.dump();
@@ -108,6 +129,10 @@ std::optional<RunRecord> resumeRun(const std::filesystem::path& dir, const Scene
             progress.warn(file.string() + " is of another scene; starting over");
             return std::nullopt;
         }
+        if (header.value("engine_build", "") != engineBuild()) {
+            progress.warn(file.string() + " was written by another build of the engine; starting over");
+            return std::nullopt;
+        }
         simulation.restoreState(in);
         return record;
     } catch (const std::exception& e) {
@@ -125,6 +150,22 @@ void removeFrameFiles(const std::filesystem::path& dir) {
         if (std::regex_match(entry.path().filename().string(), frameFile)) std::filesystem::remove(entry.path(), ec);
 }
 
+// Whether DIR holds a completed run of `scene` by this engine build with all its frame files.
+bool holdsCompletedRun(const std::filesystem::path& dir, const Scene& scene) {
+    std::ifstream in(dir / "simulation.json");
+    if (!in) return false;
+    const nlohmann::json summary = nlohmann::json::parse(in, nullptr, false);
+    if (summary.is_discarded() || summary.value("engine_build", "") != engineBuild() ||
+        summary.value("scene", nlohmann::json()).dump() != sceneToJson(scene).dump())
+        return false;
+    for (int f = 0; f <= scene.frames; ++f)
+        if ((scene.outputs.particles && !std::filesystem::exists(dir / frameName("particles", f, "bin"))) ||
+            (scene.outputs.vdb && !std::filesystem::exists(dir / frameName("frame", f, "vdb"))) ||
+            (scene.outputs.mesh && !std::filesystem::exists(dir / frameName("frame", f, "obj"))))
+            return false;
+    return true;
+}
+
 }  // namespace
 
 int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress) {
@@ -132,6 +173,11 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     std::error_code ec;
     std::filesystem::create_directories(dir, ec);
     if (ec) throw InputError(dir.string() + ": cannot create output folder (" + ec.message() + ")");
+    if (holdsCompletedRun(dir, scene)) {
+        progress.report({{"event", "done"}, {"stage", "simulate"}, {"frames", scene.frames},
+                         {"kept", "a completed run of this scene by this engine build"}});
+        return kExitOk;
+    }
     std::filesystem::remove(dir / "simulation.json", ec);
 
     const auto start = Clock::now();
@@ -188,7 +234,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
         }
     }
     const double drift = record.initialVolume > 0 ? simulation.liquidVolume() / record.initialVolume - 1 : 0;
-    nlohmann::json summary = {{"format", "viscoscope.simulation"}, {"version", 1},
+    nlohmann::json summary = {{"format", "viscoscope.simulation"}, {"version", 1}, {"engine_build", engineBuild()},
                               {"scene", record.scene}, {"frames", record.frames},
                               {"initial_volume", record.initialVolume}, {"volume_drift", drift},
                               {"hole_calibrations", holes},

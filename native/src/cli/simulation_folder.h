@@ -9,6 +9,9 @@
 
 namespace viscoscope::cli {
 
+// A digest of the file's bytes (FNV-1a, hex): tells one run's or build's file from another's.
+std::string fileDigest(const std::filesystem::path& file);
+
 // "prefix_NNNNN.ext": the name of frame NNNNN's file (frame 0 is the initial state).
 std::string frameName(const char* prefix, int frame, const char* ext);
 
@@ -19,6 +22,8 @@ std::string frameName(const char* prefix, int frame, const char* ext);
 // Until the run completes, DIR/resume.state holds its state as of a recent frame (saved every
 // minute and on cancelling); a run of the same scene into `dir` goes on from there bit for bit,
 // and one of another scene starts over and first removes the frame files it finds.
+// A completed run of the same scene by the same engine build, its frame files all there, is kept as
+// it is: running it again would give the same bits.
 int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, const ProgressReporter& progress);
 
 }  // namespace viscoscope::cli

@@ -220,14 +220,14 @@ int runSynth(const SynthArguments& args) {
     if (!cv::imwrite((dir / "exclude.png").string(), excluded)) throw std::runtime_error("cannot write exclude.png");
     if (!container.triangles.empty()) surface::writeObj(renders / "solids.obj", container);
 
-    // 3. Blender renders the clean plate and every frame at the supersampled size.
+    // 3. Blender renders the clean plate and every frame at the supersampled size. Renders that a
+    // cancelled synth of the same simulation (its simulation.json's digest) and settings left are
+    // kept, if whole, and Blender renders the rest; any others must not pass for this run's.
     const auto renderStart = Clock::now();
     nlohmann::json frames = nlohmann::json::array();
     std::vector<fs::path> images;
-    fs::remove(renders / "clean_plate.png", ec);  // what a previous run left must not pass for this one's
     for (int f = 0; f <= scene.frames; ++f) {
         images.push_back(fs::absolute(renders / frameName("frame", f, "png")));
-        fs::remove(images.back(), ec);
         frames.push_back({{"mesh", fs::absolute(simulation / frameName("frame", f, "obj")).string()},
                           {"image", images.back().string()}});
     }
@@ -236,10 +236,25 @@ int runSynth(const SynthArguments& args) {
         {"camera", blenderCameraToJson(renderCamera)},
         {"samples", args.samples},
         {"seed", scene.seed},  // Cycles' noise pattern: fixed, so a synth is reproducible
+        {"simulation_digest", fileDigest(simulation / "simulation.json")},
         {"solids", container.triangles.empty() ? nlohmann::json() : nlohmann::json(fs::absolute(renders / "solids.obj").string())},
         {"ground_height", ground ? nlohmann::json(*ground) : nlohmann::json()},
         {"clean_plate", fs::absolute(renders / "clean_plate.png").string()},
         {"frames", frames}};
+    std::ifstream previousSpec(renders / "render.json");
+    const bool sameRender = previousSpec && nlohmann::json::parse(previousSpec, nullptr, false) == spec;
+    int kept = 0;
+    auto keepIfWhole = [&](const fs::path& image) {
+        if (sameRender && fs::exists(image)) {
+            // A render cut off while Blender wrote it does not decode whole.
+            const cv::Mat picture = cv::imread(image.string(), cv::IMREAD_COLOR);
+            if (picture.cols == big.width && picture.rows == big.height) return void(++kept);
+        }
+        fs::remove(image, ec);
+    };
+    keepIfWhole(renders / "clean_plate.png");
+    for (const fs::path& image : images) keepIfWhole(image);
+    if (kept > 0) progress.report({{"event", "resumed"}, {"stage", "render"}, {"kept_images", kept}});
     writeJsonFile(spec, renders / "render.json");
     size_t rendered = 0;
     const auto reportRendered = [&] {
