@@ -20,6 +20,7 @@ one run at 96 about 3 min, both while the machine ran other work.
 """
 import argparse
 import json
+import math
 import pathlib
 import statistics
 import sys
@@ -38,14 +39,16 @@ HOLE, THICKNESS = 0.009, 0.005  # the sample cup's, m
 def scene(resolution, sideways, up):
     dx = HEIGHT / resolution
     bottom = (2 + up) * dx
-    # A few cells around the hole suffice: the calibration builds its own box on this lattice.
+    # A few cells around the hole suffice: the calibration builds its own box on this lattice. The
+    # plate and a layer of liquid over it must fit (from 128 on, 6 cells are thinner than the plate).
+    tall = max(6, math.ceil((bottom + THICKNESS) / dx) + 2)
     return {"format": "viscoscope.scene", "version": 1,
-            "domain": {"min": [-2 * dx, -2 * dx, 0], "max": [2 * dx, 2 * dx, 6 * dx], "resolution": 6},
+            "domain": {"min": [-2 * dx, -2 * dx, 0], "max": [2 * dx, 2 * dx, tall * dx], "resolution": tall},
             "solids": [{"type": "cup", "position": [sideways * dx, sideways * dx, bottom],
                         "inner_radius": 0.043, "height": 0.05, "wall_thickness": 0.006,
                         "bottom_thickness": THICKNESS, "hole_radius": HOLE}],
             "liquids": [{"type": "box", "min": [-2 * dx, -2 * dx, bottom + THICKNESS],
-                         "max": [2 * dx, 2 * dx, 6 * dx]}],
+                         "max": [2 * dx, 2 * dx, tall * dx]}],
             "material": {"density": 1400, "viscosity": 10.0, "surface_tension": 0.0},
             "gravity": [0, 0, -9.81], "fps": 1000, "frames": 1, "seed": 3,
             "output": {"particles": False, "vdb": False, "mesh": False}}

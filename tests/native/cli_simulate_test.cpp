@@ -6,11 +6,11 @@
 #include <nlohmann/json.hpp>
 
 #include <csignal>
-#include <fcntl.h>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
