@@ -177,6 +177,27 @@ TEST_F(IdentifyLoop, EvaluationIsIndependentOfTheThreadCount) {
     EXPECT_GT(e1, 0);
 }
 
+TEST_F(IdentifyLoop, GridPlacementsAverageEOverGridsMovedSideways) {
+    json doc = jobJson();
+    const identify::Job single = job(doc);
+    const identify::Observation obs = identify::loadObservation(single);
+    doc["grid_placements"] = 2;
+    const identify::Job placed = job(doc);
+    ASSERT_EQ(placed.gridPlacements, 2);
+    const identify::Evaluation aligned = identify::evaluate(single, obs, {kEtaTrue}, 16);
+    const identify::Evaluation moved = identify::evaluate(single, obs, {kEtaTrue}, 16, {}, 0.5);
+    const identify::Evaluation mean = identify::evaluate(placed, obs, {kEtaTrue}, 16);
+    std::printf("[ identify ] E(eta_true, 16^3) = %.6g aligned, %.6g moved half a cell, %.6g over both\n",
+                aligned.E, moved.E, mean.E);
+    EXPECT_NE(aligned.E, moved.E) << "the move must change the discretization";
+    EXPECT_DOUBLE_EQ(mean.E, 0.5 * (aligned.E + moved.E));
+    EXPECT_DOUBLE_EQ(mean.frameE.back(), 0.5 * (aligned.frameE.back() + moved.frameE.back()));
+    for (int bad : {0, identify::kMaxGridPlacements + 1}) {
+        doc["grid_placements"] = bad;
+        EXPECT_THROW(job(doc), InputError) << bad;
+    }
+}
+
 TEST_F(IdentifyLoop, LandscapeHasItsMinimumNearTheTruth) {
     const identify::Job j = job(jobJson());
     const identify::Observation obs = identify::loadObservation(j);

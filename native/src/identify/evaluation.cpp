@@ -193,8 +193,11 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
     return scene;
 }
 
-Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
-                    const fs::path& fieldsDir, double gridShift) {
+namespace {
+
+// One simulation of θ on the grid moved by `gridShift` cells, scored.
+Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
+                          const fs::path& fieldsDir, double gridShift) {
     using Clock = std::chrono::steady_clock;
     auto seconds = [](Clock::time_point from, Clock::time_point to) { return std::chrono::duration<double>(to - from).count(); };
     const auto start = Clock::now();
@@ -278,6 +281,30 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         ev.E += obs.trackWeight * normalizedSquaredError(simulated, referenceTrack(obs));
     }
     ev.seconds = seconds(start, Clock::now());
+    return ev;
+}
+
+}  // namespace
+
+Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
+                    const fs::path& fieldsDir, double gridShift) {
+    const int n = job.gridPlacements;
+    // The first placement is the grid as asked for, and only it writes the fields.
+    Evaluation ev = evaluateOnGrid(job, obs, theta, resolution, fieldsDir, gridShift);
+    for (int k = 1; k < n; ++k) {
+        const Evaluation other = evaluateOnGrid(job, obs, theta, resolution, {}, gridShift + double(k) / n);
+        ev.E += other.E;
+        ev.simulatedPixels += other.simulatedPixels;
+        for (size_t i = 0; i < ev.frameE.size(); ++i) ev.frameE[i] += other.frameE[i];
+        ev.seconds += other.seconds;
+        ev.simulationSeconds += other.simulationSeconds;
+        ev.silhouetteSeconds += other.silhouetteSeconds;
+        ev.fieldsSeconds += other.fieldsSeconds;
+        for (size_t i = 0; i < ev.frameSeconds.size(); ++i) ev.frameSeconds[i] += other.frameSeconds[i];
+    }
+    ev.E /= n;
+    ev.simulatedPixels /= n;
+    for (double& e : ev.frameE) e /= n;
     return ev;
 }
 

@@ -210,7 +210,9 @@ std::vector<Evaluation> evaluateAll(tbb::task_arena& arena, const Job& job, cons
 // (identify_landscape_bench at 18e9051), the minima on grids moved by 0, ¼ and ½ cell were
 // 0.864 / 0.933 / 1.054 at η = 1, 8.88 / 9.04 / 9.41 at η = 10, 104 / 114 / 128 at η = 100 and
 // 314 / 341 / 381 at η = 300; from θ* the check's two points said 9.95, 134 and 399 for the last three.
-constexpr double kAlignmentShift = 0.5;  // cells along x and y
+// Cells along x and y; with several grid placements, half their spacing, which puts the check's
+// grids midway between the search's.
+constexpr double kAlignmentShift = 0.5;
 constexpr double kAlignmentStep = 1.15;
 
 // E as JSON: null where a simulation failed (E = ∞), since JSON has no infinity.
@@ -776,7 +778,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         std::array<double, 2> band = profile ? profile->interval : cma;
         std::optional<double> alignmentSpread;  // |ln(θ_s/θ*)|
         if (alignmentPlanned) {
-            json check{{"grid_shift_cells", {kAlignmentShift, kAlignmentShift, 0.0}}};
+            const double checkShift = kAlignmentShift / job.gridPlacements;
+            json check{{"grid_shift_cells", {checkShift, checkShift, 0.0}}};
             const std::array<double, 2> thetas{bestTheta, kAlignmentStep * bestTheta};
             // A rerun of a finished job (or one killed after the check) takes the scores from the
             // checkpoint instead of simulating them again.
@@ -799,7 +802,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                     std::vector<std::string> errors;
                     const std::vector<Evaluation> shifted =
                         evaluateAll(arena, job, obs, {{thetas[0]}, {thetas[1]}}, fineRes,
-                                    [](size_t) { return fs::path(); }, kAlignmentShift, errors);
+                                    [](size_t) { return fs::path(); }, checkShift, errors);
                     const std::array<double, 2> E{shifted[0].E, shifted[1].E};
                     alignmentCheckSeconds = std::chrono::duration<double>(Clock::now() - checkStart).count();
                     check["seconds"] = alignmentCheckSeconds;
@@ -841,8 +844,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                                        "of its minimum"
                                      : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
         if (alignmentSpread)
-            method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved by half "
-                      "a cell along x and y (alignment_check)";
+            method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
+                      "and y by half a cell, or half the spacing of the grid placements (alignment_check)";
         entry["interval_method"] = method;
         result.interval.push_back(band);
         if (i == 0) result.intervalMethod = std::string(profile ? "profile" : "cma") + (alignmentSpread ? "+alignment" : "");
@@ -878,6 +881,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"population", es.lambda()},
              {"resolution", fineRes},
              {"frames", fineFrames},
+             {"grid_placements", job.gridPlacements},
              {"coarse_resolution", coarseRes},
              {"coarse_frames", coarseFrames},
              {"coarse_generations", coarseEnd},

@@ -188,6 +188,10 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": alignment_check: must be true or false");
         job.alignmentCheck = doc.at("alignment_check").get<bool>();
     }
+    job.gridPlacements = optionalInt(doc, "grid_placements", 1, 1, origin);
+    if (job.gridPlacements > kMaxGridPlacements)
+        throw InputError(origin + ": grid_placements: must be at most " + std::to_string(kMaxGridPlacements) +
+                         ", got " + std::to_string(job.gridPlacements));
     if (const auto comparison = optionalString(doc, "silhouette_comparison", origin))
         job.silhouetteComparison = parseSilhouetteComparison(*comparison, origin + ": silhouette_comparison");
     if (doc.contains("fidelity") && !doc.at("fidelity").is_null()) {
