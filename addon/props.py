@@ -126,6 +126,11 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                               default=3.0, min=1.01, max=1000.0)
     identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512)
     max_generations: IntProperty(name="Max Generations", default=20, min=1, max=1000)
+    grid_placements: IntProperty(name="Grid Placements", default=1, min=1, max=8,
+                                 description="Score each viscosity as the mean over this many simulation grids "
+                                             "moved by fractions of a cell, so that where small features such as "
+                                             "the hole fall against the cells matters less (costs as many times "
+                                             "as much per evaluation)")
     time_budget_minutes: FloatProperty(name="Time Budget (min)", default=10.0, min=0.0, max=10000.0,
                                        description="Wall time for the whole identification; the engine stops "
                                                    "before a generation that would overrun it (0 = no limit)")

@@ -43,6 +43,7 @@ def write_job(context, folder):
                         "spread": vs.eta_initial * (vs.eta_spread - 1.0), "min": 1e-3, "max": 1e4, "log": True}],
         "resolution": vs.identify_resolution,
         "max_generations": vs.max_generations,
+        "grid_placements": vs.grid_placements,
         "time_budget_s": vs.time_budget_minutes * 60.0,
         "seed": vs.sim_seed,
     }
