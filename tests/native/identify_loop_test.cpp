@@ -355,6 +355,32 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
+// The budget's prediction of a full-fidelity evaluation comes from the coarse evaluations near the
+// coarse best, where the full-fidelity phase restarts, not from the scan's far and slow points, and
+// the frames the full clip adds cost what the coarse clip's last third did.
+TEST(TimeBudget, PredictsAFullEvaluationFromTheCoarseOnesNearTheBest) {
+    using identify::predictedFullEvaluationSeconds;
+    const auto record = [](const char* fidelity, double theta, double E, double seconds, std::vector<double> frames) {
+        return json{{"fidelity", fidelity}, {"theta", {theta}}, {"E", E}, {"seconds", seconds}, {"frame_s", frames}};
+    };
+    const std::vector<double> even(60, 0.2), dearerLate = [] {
+        std::vector<double> f(60, 0.1);
+        for (int i = 40; i < 60; ++i) f[i] = 0.4;
+        return f;
+    }();
+    json evaluated = json::array({record("coarse", 1, 5, 70, even), record("coarse", 10, 3, 30, even),
+                                  record("coarse", 100, 2, 20, even), record("coarse", 300, 1, 12, even),
+                                  record("coarse", 250, 1.5, 14, even), record("full", 300, 0.5, 1000, even)});
+    // Frames 0–59 coarse, 0–179 full: three times the frames at the same rate.
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 48, 48, 59, 179), 3 * (12 + 14) / 2.0, 1e-9);
+    // A coarser grid: (48/24)⁴ as many cells × steps.
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 24, 48, 59, 179), 16 * 3 * (12 + 14) / 2.0, 1e-9);
+    // Cheap early frames: the 120 added frames at the last third's 0.4 s, against 12 s for 60.
+    evaluated = json::array({record("coarse", 300, 1, 12, dearerLate)});
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 48, 48, 59, 179), 12 * (12 + 120 * 0.4) / 12, 1e-9);
+    EXPECT_EQ(predictedFullEvaluationSeconds(json::array(), 48, 48, 59, 179), 0.0);
+}
+
 // OUT/fields holds θ*'s hidden fields for every frame. They are the best full-fidelity evaluation's
 // own, kept from the search rather than simulated again, and equal to a fresh simulation of θ*,
 // which the run falls back to when they are missing.

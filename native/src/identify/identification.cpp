@@ -128,7 +128,7 @@ constexpr double kCoarseToFineShift = 0.35;
 // phase a single generation in a 10-minute run; hence the cap. On the same grid over a third of the
 // clip, scaled by the frame count alone, the prediction was low instead (the first frames are the
 // cheapest): 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³, η = 10, and
-// 160 against 200–230 s at η = 3; see clipLengthening for the better prediction, and the margin.
+// 160 against 200–230 s at η = 3; see fineGenerationSeconds for the better prediction, and the margin.
 constexpr double kCoarseBudgetShare = 0.5;
 constexpr double kFineTimeMargin = 1.15;
 // Closer than this in ln θ (0.3 %), a parabolic proposal repeats an evaluation (see parabolicProposal).
@@ -349,6 +349,43 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
     return inverse ? 1 / vertex : std::exp(vertex);
 }
 
+// Per evaluation near the coarse best rather than per coarse generation: the first coarse generation
+// scans the whole initial range, and its lowest θ costs the most. On the sample cup at η = 300 a
+// 77 s scan, the whole coarse phase, predicted 178 s per full generation where 68–77 s were
+// measured, and warned that the run would overrun its budget. The first frames are cheap (the
+// liquid is still in the cup and the time step long: 0.5 s a frame against 1.0–1.2 s later at
+// η = 3, 48³), so scaling by the frame count alone predicted 1.2–1.4× too little at η = 1–3.
+double predictedFullEvaluationSeconds(const json& evaluated, int coarseResolution, int fullResolution,
+                                      int coarseFrames, int fullFrames) {
+    const json* coarseBest = nullptr;
+    for (const json& e : evaluated)
+        if (e.at("fidelity") == kCoarse && !e.at("E").is_null() &&
+            (!coarseBest || e.at("E").get<double>() < coarseBest->at("E").get<double>()))
+            coarseBest = &e;
+    double sum = 0;
+    int count = 0;
+    for (const json& e : evaluated) {
+        if (e.at("fidelity") != kCoarse) continue;
+        bool near = true;
+        for (size_t i = 0; coarseBest && i < e.at("theta").size(); ++i)
+            near = near && std::abs(std::log(e.at("theta")[i].get<double>() /
+                                             coarseBest->at("theta")[i].get<double>())) <= kCoarseToFineShift;
+        if (!near) continue;
+        double lengthening = (fullFrames + 1.0) / (coarseFrames + 1.0);
+        const std::vector<double> frameSeconds = e.value("frame_s", std::vector<double>());
+        const size_t tail = std::max<size_t>(1, frameSeconds.size() / 3);
+        double all = 0, last = 0;
+        for (size_t f = 0; f < frameSeconds.size(); ++f) {
+            all += frameSeconds[f];
+            if (f + tail >= frameSeconds.size()) last += frameSeconds[f];
+        }
+        if (all > 0) lengthening = (all + (fullFrames - coarseFrames) * last / tail) / all;
+        sum += e.at("seconds").get<double>() * std::pow(double(fullResolution) / coarseResolution, 4) * lengthening;
+        ++count;
+    }
+    return count ? sum / count : 0.0;
+}
+
 LogSearchSpace logSearchSpace(const Job& job) {
     const int n = static_cast<int>(job.parameters.size());
     LogSearchSpace space{Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(n)};
@@ -471,33 +508,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         for (double x : v) s += x;
         return v.empty() ? 0.0 : s / v.size();
     };
-    // How much longer the full clip takes than the coarse one: its frames plus the remaining ones at
-    // the rate of the coarse clip's last third. The first frames are cheap (the liquid is still in
-    // the cup and the time step long: 0.5 s a frame against 1.0–1.2 s later at η = 3, 48³), so
-    // scaling by the frame count alone predicted 1.2–1.4× too little at η = 1–3.
-    auto clipLengthening = [&] {
-        std::vector<double> ratios;
-        for (const json& e : evaluated) {
-            if (e.at("fidelity") != kCoarse || !e.contains("frame_s")) continue;
-            const std::vector<double> frameSeconds = e.at("frame_s").get<std::vector<double>>();
-            if (frameSeconds.empty()) continue;
-            const size_t tail = std::max<size_t>(1, frameSeconds.size() / 3);
-            double all = 0, last = 0;
-            for (size_t i = 0; i < frameSeconds.size(); ++i) {
-                all += frameSeconds[i];
-                if (i + tail >= frameSeconds.size()) last += frameSeconds[i];
-            }
-            if (all > 0) ratios.push_back((all + (fineFrames - coarseFrames) * last / tail) / all);
-        }
-        return ratios.empty() ? (fineFrames + 1.0) / (coarseFrames + 1.0) : mean(ratios);
-    };
-    // Predicted seconds of a full-fidelity generation: measured ones, else the coarse ones scaled
-    // by (r/r_c)⁴ (cells × time steps; measured 3.5–6.4× for 32³ → 48³ against 5.1× predicted) and
-    // by the clip's length.
+    // Predicted seconds of a full-fidelity generation: the measured ones' mean, else ⌈λ / threads⌉
+    // rounds of predictedFullEvaluationSeconds.
     auto fineGenerationSeconds = [&] {
-        return genSecondsFine.empty()
-                   ? mean(genSecondsCoarse) * std::pow(double(fineRes) / coarseRes, 4) * clipLengthening()
-                   : mean(genSecondsFine);
+        if (!genSecondsFine.empty()) return mean(genSecondsFine);
+        const double threads = arena.max_concurrency();
+        return std::ceil(es.lambda() / threads) *
+               predictedFullEvaluationSeconds(evaluated, coarseRes, fineRes, coarseFrames, fineFrames);
     };
     // The alignment check's two evaluations, as a share of a full generation's rounds on the arena,
     // with the margin the minimum generations get (at η = 1 on the sample cup: 61.5 s measured where

@@ -283,6 +283,15 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
 // None when the lowest point has no neighbour on one side, or E is not finite there.
 std::optional<double> bracketedVertex(const std::vector<std::pair<double, double>>& points, bool inverse);
 
+// The time budget's prediction of a full-fidelity evaluation before any has run: the mean, over
+// the coarse evaluations within kCoarseToFineShift (ln θ, every coordinate) of the best coarse one,
+// where the full-fidelity phase restarts, of their seconds scaled by (r/r_c)⁴ (cells × time steps)
+// and by how much longer the full clip takes: its frames plus the remaining ones at the rate of
+// the coarse clip's last third. `evaluated` holds the checkpoint's evaluation records ("fidelity",
+// "theta", "E", "seconds", "frame_s"). 0 without coarse evaluations.
+double predictedFullEvaluationSeconds(const nlohmann::json& evaluated, int coarseResolution, int fullResolution,
+                                      int coarseFrames, int fullFrames);
+
 // ---------------------------------------------------------------------------------------------
 // The search space the optimizer sees (see the top of this file), shared with benchmarks that run
 // other optimizers on the same job.
