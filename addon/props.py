@@ -27,6 +27,16 @@ MODEL_ITEMS = [
     ('HERSCHEL_BULKLEY', "Herschel–Bulkley", "Yield stress τ0 with a power-law flow above it"),
 ]
 
+# The job's grid_placement_schedule.
+PLACEMENT_SCHEDULE_ITEMS = [
+    ('by_generation', "By Generation",
+     "Each generation of the search runs on one placement, in turn; the result is the minimum of the "
+     "error's mean over them (no extra cost)"),
+    ('each_evaluation', "Each Evaluation",
+     "Every viscosity is simulated on all placements and scored by their mean (costs as many times as "
+     "much per evaluation)"),
+]
+
 
 def _cup_update(self, _context):
     from . import cup_mesh
@@ -126,11 +136,11 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                               default=3.0, min=1.01, max=1000.0)
     identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512)
     max_generations: IntProperty(name="Max Generations", default=20, min=1, max=1000)
-    grid_placements: IntProperty(name="Grid Placements", default=1, min=1, max=8,
-                                 description="Score each viscosity as the mean over this many simulation grids "
-                                             "moved by fractions of a cell, so that where small features such as "
-                                             "the hole fall against the cells matters less (costs as many times "
-                                             "as much per evaluation)")
+    grid_placements: IntProperty(name="Grid Placements", default=2, min=1, max=8,
+                                 description="Score viscosities on this many simulation grids moved by "
+                                             "fractions of a cell, so that where small features such as the "
+                                             "hole fall against the cells matters less")
+    placement_schedule: EnumProperty(name="Placements", items=PLACEMENT_SCHEDULE_ITEMS, default='by_generation')
     time_budget_minutes: FloatProperty(name="Time Budget (min)", default=10.0, min=0.0, max=10000.0,
                                        description="Wall time for the whole identification; the engine stops "
                                                    "before a generation that would overrun it (0 = no limit)")

@@ -152,6 +152,9 @@ class VIEW3D_PT_viscoscope_identify(_ViscoscopePanel, bpy.types.Panel):
         col.prop(vs, "identify_resolution")
         col.prop(vs, "max_generations")
         col.prop(vs, "grid_placements")
+        row = col.row()
+        row.enabled = vs.grid_placements > 1
+        row.prop(vs, "placement_schedule", text="")
         col.prop(vs, "time_budget_minutes")
         draw_job(layout, context, "identify", "viscoscope.identify", "Identify Viscosity",
                  resume_op="viscoscope.identify_resume")

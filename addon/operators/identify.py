@@ -44,6 +44,7 @@ def write_job(context, folder):
         "resolution": vs.identify_resolution,
         "max_generations": vs.max_generations,
         "grid_placements": vs.grid_placements,
+        "grid_placement_schedule": vs.placement_schedule,
         "time_budget_s": vs.time_budget_minutes * 60.0,
         "seed": vs.sim_seed,
     }

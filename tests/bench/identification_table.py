@@ -121,6 +121,7 @@ def one_row(args, eta, work):
         "time_budget_s": args.time_budget,
         "seed": args.seed,
         "grid_placements": args.grid_placements,
+        "grid_placement_schedule": args.placement_schedule,
     }
     (work / "job.json").write_text(json.dumps(job, indent=1))
     identify = [args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress", "none",
@@ -188,8 +189,11 @@ def main():
     parser.add_argument("--reference-seed", type=int, default=11)
     parser.add_argument("--seed", type=int, default=3, help="the identification's seed (CMA-ES and particles)")
     parser.add_argument("--generations", type=int, default=40, help="max_generations of the job")
-    parser.add_argument("--grid-placements", type=int, default=1,
-                        help="grid_placements of the job: E is the mean over grids moved k/n cell sideways")
+    parser.add_argument("--grid-placements", type=int, default=2,
+                        help="grid_placements of the job: grids moved k/n cell sideways")
+    parser.add_argument("--placement-schedule", choices=["each_evaluation", "by_generation"], default="by_generation",
+                        help="grid_placement_schedule of the job: every evaluation on all placements, or one per "
+                             "full-fidelity generation in turn")
     parser.add_argument("--time-budget", type=float, default=600,
                         help="time_budget_s of the job: wall seconds for the search (0 = none)")
     parser.add_argument("--eta-min", type=float, default=0.1)

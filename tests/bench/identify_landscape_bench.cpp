@@ -3,8 +3,9 @@
 // liquid. Evaluates every (θ, shift) pair of the job's first parameter at the job's resolution
 // (exactly as identify's full-fidelity evaluations, all cores), prints E per pair, each shift's
 // minimum of identify's profile parabola (in 1/θ for viscosity, else ln θ), and the minimum of the
-// mean over the shifts. A job with grid_placements n > 1 scores each pair as identify does, the mean
-// over n placements, each moved by the pair's shift too.
+// mean over the shifts. A job whose grid_placement_schedule is each_evaluation scores each pair as
+// identify does, the mean over its grid_placements, each moved by the pair's shift too; by
+// generation (the default), the pair's shift alone.
 //
 //   identify_landscape_bench --job JOB.json --work DIR --thetas 7,8,9,10,11,12.5 [--shifts 0,0.25,0.5,0.75]
 //
@@ -47,7 +48,7 @@ int main(int argc, char** argv) {
     app.add_option("--thetas", thetas, "values of the job's first parameter (five or more for the minima)")
         ->required()
         ->delimiter(',');
-    app.add_option("--shifts", shifts, "grid shifts along x and y, in cells (added to each of the job's grid_placements)")->delimiter(',');
+    app.add_option("--shifts", shifts, "grid shifts along x and y, in cells (added to each of the job's grid_placements scored on each evaluation)")->delimiter(',');
     CLI11_PARSE(app, argc, argv);
     if (!std::all_of(thetas.begin(), thetas.end(), [](double t) { return std::isfinite(t) && t > 0; }))
         return std::fprintf(stderr, "identify_landscape_bench: --thetas: every value must be positive and finite\n"), 2;

@@ -101,11 +101,13 @@ def test_identify_cancel_resume_and_results(ctx, tmp_work, fake_engine, use_engi
     vs = ctx.scene.viscoscope
     vs.max_generations = 40
     vs.grid_placements = 2
+    vs.placement_schedule = 'each_evaluation'
     monkeypatch.setenv("FAKE_ENGINE_SLEEP", "0.05")
     from viscoscope.operators.identify import VISCOSCOPE_OT_identify, identify_dir
     args, out_dir = VISCOSCOPE_OT_identify.prepare(VISCOSCOPE_OT_identify, ctx)
     job = json.load(open(os.path.join(identify_dir(ctx.scene), "job.json")))
     assert job["format"] == "viscoscope.job" and job["max_generations"] == 40 and job["grid_placements"] == 2
+    assert job["grid_placement_schedule"] == "each_evaluation"
     assert job["parameters"][0]["initial"] == pytest.approx(5.0)
     assert os.path.isfile(os.path.join(identify_dir(ctx.scene), job["scene"]))
     runner.start(ctx, "identify", args, out_dir, lambda c, d: None)

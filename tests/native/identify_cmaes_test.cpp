@@ -5,9 +5,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <vector>
 
 namespace {
 
@@ -199,4 +201,40 @@ TEST(BracketedVertex, FindsAParabolasVertexFromItsBracket) {
     const std::optional<double> flat = bracketedVertex({{20, 1}, {10, 1}, {40, 1}}, false);
     ASSERT_TRUE(flat);
     EXPECT_NEAR(*flat, 20.0, 1e-9);
+}
+
+// E's mean over grid placements from evaluations that each ran on one: each placement's points
+// joined by straight lines in 1/θ, their mean at every point where all lines reach. Each placement
+// here is a V with its tip at one of its own points, so its lines are exact and the profile is the
+// mean of the two V's.
+TEST(PlacementMeanProfile, AveragesThePlacementsLinesAtEveryPoint) {
+    using viscoscope::identify::PlacedPoint;
+    using viscoscope::identify::placementMeanProfile;
+    const auto first = [](double theta) { return std::abs(1 / theta - 1 / 100.0); };
+    const auto second = [](double theta) { return 2 * std::abs(1 / theta - 1 / 95.0); };
+    std::vector<PlacedPoint> points;
+    for (double theta : {80.0, 90.0, 100.0, 125.0}) points.push_back({theta, first(theta), 0.0});
+    points.push_back({110.0, first(110.0) + 0.001, 0.0});  // the same θ twice: averaged
+    points.push_back({110.0, first(110.0) - 0.001, 0.0});
+    for (double theta : {85.0, 95.0, 105.0, 120.0, 130.0}) points.push_back({theta, second(theta), 0.5});
+    points.push_back({115.0, NAN, 0.5});  // a failed evaluation is left out
+    const auto profile = placementMeanProfile(points, true);
+    // 1/θ spans [1/125, 1/80] on one placement and [1/130, 1/85] on the other: 80 and 130 are out.
+    const std::vector<double> expected{85, 90, 95, 100, 105, 110, 120, 125};
+    ASSERT_EQ(profile.size(), expected.size());
+    std::vector<double> thetas;
+    for (const auto& [theta, E] : profile) {
+        thetas.push_back(theta);
+        EXPECT_NEAR(E, 0.5 * (first(theta) + second(theta)), 1e-12) << theta;
+    }
+    std::sort(thetas.begin(), thetas.end());
+    EXPECT_EQ(thetas, expected);
+    const auto lowest = std::min_element(profile.begin(), profile.end(),
+                                         [](const auto& a, const auto& b) { return a.second < b.second; });
+    EXPECT_EQ(lowest->first, 95.0);  // the steeper V's tip
+    // One placement: its points as they are; no common span: the first placement's.
+    EXPECT_EQ(placementMeanProfile({{10, 1, 0}, {20, 2, 0}}, true).size(), 2u);
+    const auto apart = placementMeanProfile({{10, 1, 0}, {11, 2, 0}, {20, 3, 0.5}, {21, 4, 0.5}}, true);
+    ASSERT_EQ(apart.size(), 2u);
+    EXPECT_TRUE((apart[0].first == 10 || apart[0].first == 11) && (apart[1].first == 10 || apart[1].first == 11));
 }

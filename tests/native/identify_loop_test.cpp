@@ -179,9 +179,11 @@ TEST_F(IdentifyLoop, EvaluationIsIndependentOfTheThreadCount) {
 
 TEST_F(IdentifyLoop, GridPlacementsAverageEOverGridsMovedSideways) {
     json doc = jobJson();
+    doc["grid_placements"] = 1;
     const identify::Job single = job(doc);
     const identify::Observation obs = identify::loadObservation(single);
     doc["grid_placements"] = 2;
+    doc["grid_placement_schedule"] = "each_evaluation";
     const identify::Job placed = job(doc);
     ASSERT_EQ(placed.gridPlacements, 2);
     const identify::Evaluation aligned = identify::evaluate(single, obs, {kEtaTrue}, 16);
@@ -196,6 +198,53 @@ TEST_F(IdentifyLoop, GridPlacementsAverageEOverGridsMovedSideways) {
         doc["grid_placements"] = bad;
         EXPECT_THROW(job(doc), InputError) << bad;
     }
+}
+
+// With placements by generation, each full-fidelity generation runs on one grid placement, in turn,
+// at the cost of one placement; θ* is the lowest point of E's mean over the placements, and the
+// fields in OUT/fields are θ*'s.
+TEST_F(IdentifyLoop, PlacementsByGenerationTakeTurnsAndThetaStarIsTheMeansMinimum) {
+    json doc = jobJson();
+    doc["max_generations"] = 6;
+    doc["fidelity"] = {{"coarse_generations", 2}};
+    doc["grid_placements"] = 2;
+    doc["grid_placement_schedule"] = "by_generation";
+    identify::IdentifyOptions options;
+    const fs::path out = dir_ / "by_generation_out";
+    const identify::IdentificationResult result = identify::identify(job(doc), out, options);
+    const json& history = result.document.at("history");
+    ASSERT_EQ(history.size(), 6u);
+    for (int g = 0; g < 6; ++g)
+        EXPECT_EQ(history[g].at("grid_shift").get<double>(), g < 2 ? 0.0 : 0.5 * ((g - 2) % 2)) << "generation " << g + 1;
+    EXPECT_EQ(result.evaluations, 6 * 4);  // λ = 4 a generation, as with one placement
+    std::vector<identify::PlacedPoint> points;
+    for (const json& e : result.document.at("evaluated"))
+        if (e.at("fidelity") == "full" && !e.at("E").is_null())
+            points.push_back({e.at("theta")[0].get<double>(), e.at("E").get<double>(), e.at("grid_shift").get<double>()});
+    const auto profile = identify::placementMeanProfile(points, true);
+    const auto lowest = std::min_element(profile.begin(), profile.end(),
+                                         [](const auto& a, const auto& b) { return a.second < b.second; });
+    ASSERT_NE(lowest, profile.end());
+    std::printf("[ identify ] by generation: eta* = %.4f, E of the mean %.5g over %zu points\n", result.theta[0],
+                result.E, profile.size());
+    EXPECT_EQ(result.theta[0], lowest->first);
+    EXPECT_EQ(result.E, lowest->second);
+    std::ifstream ownerFile(out / "fields" / "evaluation.json");
+    ASSERT_TRUE(ownerFile);
+    EXPECT_EQ(json::parse(ownerFile).at("theta"), json(result.theta));
+    // The profile is one-dimensional, and the schedule has two names.
+    doc["grid_placement_schedule"] = "alternate";
+    EXPECT_THROW(job(doc), InputError);
+    doc["grid_placement_schedule"] = "by_generation";
+    doc["parameters"].push_back({{"name", "surface_tension"}, {"initial", 0.05}, {"spread", 0.05}});
+    EXPECT_THROW(job(doc), InputError);
+    // Without the schedule, such a search takes one placement.
+    doc.erase("grid_placement_schedule");
+    doc.erase("grid_placements");
+    EXPECT_EQ(job(doc).gridPlacements, 1);
+    EXPECT_EQ(job(jobJson()).gridPlacements, 2);
+    EXPECT_EQ(job(jobJson()).placementSchedule, identify::PlacementSchedule::ByGeneration);
+    fs::remove_all(out);
 }
 
 TEST_F(IdentifyLoop, LandscapeHasItsMinimumNearTheTruth) {
@@ -265,11 +314,15 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
             ++restarts;
         } else if (origin == "parabola") {
             EXPECT_TRUE(last && g > firstFull) << "generation " << g;
-            std::vector<std::pair<double, double>> before;
+            // By default the generations take the two grid placements in turn, and the proposal
+            // comes from E's mean over them.
+            std::vector<identify::PlacedPoint> before;
             for (const json& p : evaluated)
                 if (p.at("fidelity") == "full" && p.at("generation").get<int>() < g)
-                    before.emplace_back(p.at("theta")[0].get<double>(), p.at("E").get<double>());
-            const std::optional<double> vertex = identify::bracketedVertex(before, true);
+                    before.push_back({p.at("theta")[0].get<double>(), p.at("E").get<double>(),
+                                      p.at("grid_shift").get<double>()});
+            const std::optional<double> vertex =
+                identify::bracketedVertex(identify::placementMeanProfile(before, true), true);
             ASSERT_TRUE(vertex) << "generation " << g;
             const double mean = generations[g - 2].at("mean_theta")[0].get<double>();
             EXPECT_GE(eta, std::min(*vertex, mean) * (1 - 1e-9)) << "generation " << g;

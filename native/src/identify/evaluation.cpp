@@ -288,7 +288,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
 
 Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
                     const fs::path& fieldsDir, double gridShift) {
-    const int n = job.gridPlacements;
+    const int n = job.placementSchedule == PlacementSchedule::EachEvaluation ? job.gridPlacements : 1;
     // The first placement is the grid as asked for, and only it writes the fields.
     Evaluation ev = evaluateOnGrid(job, obs, theta, resolution, fieldsDir, gridShift);
     for (int k = 1; k < n; ++k) {

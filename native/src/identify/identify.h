@@ -125,6 +125,7 @@ struct FidelitySchedule {
 // all scored least at the truth (see excludeGroundBand), and the stream fills most of the view.
 constexpr double kDefaultGroundBandShare = 0.25;
 constexpr int kMaxGridPlacements = 8;  // Job::gridPlacements
+enum class PlacementSchedule { EachEvaluation, ByGeneration };  // Job::placementSchedule
 
 struct Job {
     std::filesystem::path file;
@@ -176,12 +177,20 @@ struct Job {
     // On the sample cup at 48³ the half-cell shift alone moved the best η against the 64³ η = 1
     // reference from 0.86 to about 1.06, and against η = 10 from about 9.3 to 10.0.
     bool alignmentCheck = true;
-    // Every evaluation's E is the mean over this many placements of the grid, moved by k/n cells along
-    // x and y (k = 0 … n − 1), at n times the cost. Where a small feature sits against the faces then
-    // matters less: on the sample cup at 48³ the minima of E on grids moved 0, ¼, ½ and ¾ cell were
-    // 105.5 / 104.3 / 95.9 / 102.7 against the η = 100 reference, and that of their mean 102.3
-    // (identify_landscape_bench; README, "Job files").
-    int gridPlacements = 1;
+    // E is scored on this many placements of the grid, moved by k/n cells along x and y
+    // (k = 0 … n − 1). Where a small feature sits against the faces then matters less: on the
+    // sample cup at 48³ the minima of E on grids moved 0, ¼, ½ and ¾ cell were 105.5 / 104.3 / 95.9 /
+    // 102.7 against the η = 100 reference, and that of their mean 102.3 (identify_landscape_bench;
+    // README, "Job files"). 1 by default when several parameters are searched.
+    int gridPlacements = 2;
+    // ByGeneration (the default): each full-fidelity generation runs on one placement, in turn (the
+    // coarse ones on the job's grid), at no extra cost, and θ* is the lowest point of E's mean over
+    // them (placementMeanProfile). EachEvaluation: every evaluation runs on all of them, at n times
+    // the cost, and E is their mean. On Table 1 of the sample cup (600 s budget), 2 by generation
+    // gave ε_η 3.7 / 0.8 / 1.2 / 2.5 / 1.7 / 5.0 % at η = 1 … 300, one placement 3.7 / 0.8 / 0.5 /
+    // 0.8 / 5.2 / 5.5 %, and 2 on each evaluation 11.7 / 4.5 / 1.3 / 1.4 / 1.3 / 1.3 % (half as
+    // many evaluations, too few at η = 1 and 3). Only EachEvaluation with several parameters.
+    PlacementSchedule placementSchedule = PlacementSchedule::ByGeneration;
     FidelitySchedule fidelity;
     nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
 };
@@ -253,7 +262,8 @@ struct Evaluation {
 // liquid and camera stay where they are).
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution, double gridShift = 0);
 // Simulates θ at `resolution` and scores it, on each of the job's gridPlacements in turn (E, the
-// frames' E and the silhouette area are their means, the timings their sums). With a `fieldsDir`,
+// frames' E and the silhouette area are their means, the timings their sums), or with the
+// ByGeneration schedule on the grid moved by `gridShift` alone. With a `fieldsDir`,
 // the first placement also writes every frame 0..lastSimFrame there as frame_%05d.vdb (surface,
 // velocity, pressure) for Blender, so that the best evaluation's own run can be kept instead of
 // simulated again.
@@ -291,6 +301,19 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
 // "theta", "E", "seconds", "frame_s"). 0 without coarse evaluations.
 double predictedFullEvaluationSeconds(const nlohmann::json& evaluated, int coarseResolution, int fullResolution,
                                       int coarseFrames, int fullFrames);
+
+// E's mean over grid placements as a profile, from evaluations that each ran on one placement (the
+// job's "by_generation" schedule): `points` are (θ, E, grid shift). Each placement's points are
+// joined by straight lines in u (1/θ when `inverse`, else ln θ; repeated θ averaged), and at every
+// point's θ where all placements' lines reach, the profile holds the mean of their E there. The
+// lines, not a fitted curve, because E is often a V near its minimum (on the sample cup at η = 10 it
+// was 0.034 at the truth and 0.045–0.058 at ±10 % on both placements) and a parabola misplaces its
+// tip. Points of a single placement are returned as they are; without a common span, those of the
+// first placement listed.
+struct PlacedPoint {
+    double theta = 0, E = 0, gridShift = 0;
+};
+std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<PlacedPoint>& points, bool inverse);
 
 // ---------------------------------------------------------------------------------------------
 // The search space the optimizer sees (see the top of this file), shared with benchmarks that run

@@ -188,10 +188,27 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": alignment_check: must be true or false");
         job.alignmentCheck = doc.at("alignment_check").get<bool>();
     }
-    job.gridPlacements = optionalInt(doc, "grid_placements", 1, 1, origin);
+    // Placements by generation need a one-dimensional profile of E's mean over them; a search over
+    // several parameters defaults to a single placement.
+    const bool oneParameter = job.parameters.size() == 1;
+    if (!oneParameter) {
+        job.gridPlacements = 1;
+        job.placementSchedule = PlacementSchedule::EachEvaluation;
+    }
+    job.gridPlacements = optionalInt(doc, "grid_placements", job.gridPlacements, 1, origin);
     if (job.gridPlacements > kMaxGridPlacements)
         throw InputError(origin + ": grid_placements: must be at most " + std::to_string(kMaxGridPlacements) +
                          ", got " + std::to_string(job.gridPlacements));
+    if (const auto schedule = optionalString(doc, "grid_placement_schedule", origin)) {
+        if (*schedule != "each_evaluation" && *schedule != "by_generation")
+            throw InputError(origin + ": grid_placement_schedule: expected \"each_evaluation\" or \"by_generation\", got \"" +
+                             *schedule + "\"");
+        job.placementSchedule =
+            *schedule == "by_generation" ? PlacementSchedule::ByGeneration : PlacementSchedule::EachEvaluation;
+        if (job.placementSchedule == PlacementSchedule::ByGeneration && !oneParameter)
+            throw InputError(origin + ": grid_placement_schedule: \"by_generation\" needs exactly one parameter, got " +
+                             std::to_string(job.parameters.size()));
+    }
     if (const auto comparison = optionalString(doc, "silhouette_comparison", origin))
         job.silhouetteComparison = parseSilhouetteComparison(*comparison, origin + ": silhouette_comparison");
     if (doc.contains("fidelity") && !doc.at("fidelity").is_null()) {
