@@ -113,6 +113,9 @@ std::string fingerprint(const Job& job) {
     // Their defaults may change between engine versions:
     doc["_silhouette_comparison"] = silhouetteComparisonName(job.silhouetteComparison);
     doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
+    doc["_grid_placements"] = job.gridPlacements;
+    doc["_grid_placement_schedule"] = job.placementSchedule == PlacementSchedule::ByGeneration ? "by_generation"
+                                                                                               : "each_evaluation";
     const std::string text = doc.dump();
     std::uint64_t hash = 1469598103934665603ull;
     for (unsigned char c : text) hash = (hash ^ c) * 1099511628211ull;
