@@ -114,8 +114,7 @@ std::string fingerprint(const Job& job) {
     doc["_silhouette_comparison"] = silhouetteComparisonName(job.silhouetteComparison);
     doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
     doc["_grid_placements"] = job.gridPlacements;
-    doc["_grid_placement_schedule"] = job.placementSchedule == PlacementSchedule::ByGeneration ? "by_generation"
-                                                                                               : "each_evaluation";
+    doc["_grid_placement_schedule"] = placementScheduleName(job.placementSchedule);
     const std::string text = doc.dump();
     std::uint64_t hash = 1469598103934665603ull;
     for (unsigned char c : text) hash = (hash ^ c) * 1099511628211ull;

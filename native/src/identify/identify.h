@@ -126,6 +126,8 @@ struct FidelitySchedule {
 constexpr double kDefaultGroundBandShare = 0.25;
 constexpr int kMaxGridPlacements = 8;  // Job::gridPlacements
 enum class PlacementSchedule { EachEvaluation, ByGeneration };  // Job::placementSchedule
+// The job's "grid_placement_schedule" names: "each_evaluation", "by_generation".
+const char* placementScheduleName(PlacementSchedule schedule);
 
 struct Job {
     std::filesystem::path file;

@@ -91,6 +91,10 @@ ParameterSpec parseParameter(const nlohmann::json& p, const std::string& where) 
 
 }  // namespace
 
+const char* placementScheduleName(PlacementSchedule schedule) {
+    return schedule == PlacementSchedule::ByGeneration ? "by_generation" : "each_evaluation";
+}
+
 Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
     if (!doc.is_object()) throw InputError(origin + ": must be a JSON object");
     if (doc.value("format", nlohmann::json()) != nlohmann::json("viscoscope.job"))
@@ -200,11 +204,13 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": grid_placements: must be at most " + std::to_string(kMaxGridPlacements) +
                          ", got " + std::to_string(job.gridPlacements));
     if (const auto schedule = optionalString(doc, "grid_placement_schedule", origin)) {
-        if (*schedule != "each_evaluation" && *schedule != "by_generation")
+        if (*schedule == placementScheduleName(PlacementSchedule::ByGeneration))
+            job.placementSchedule = PlacementSchedule::ByGeneration;
+        else if (*schedule == placementScheduleName(PlacementSchedule::EachEvaluation))
+            job.placementSchedule = PlacementSchedule::EachEvaluation;
+        else
             throw InputError(origin + ": grid_placement_schedule: expected \"each_evaluation\" or \"by_generation\", got \"" +
                              *schedule + "\"");
-        job.placementSchedule =
-            *schedule == "by_generation" ? PlacementSchedule::ByGeneration : PlacementSchedule::EachEvaluation;
         if (job.placementSchedule == PlacementSchedule::ByGeneration && !oneParameter)
             throw InputError(origin + ": grid_placement_schedule: \"by_generation\" needs exactly one parameter, got " +
                              std::to_string(job.parameters.size()));
