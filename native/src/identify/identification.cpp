@@ -290,6 +290,16 @@ std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count) 
     return points;
 }
 
+// The evaluation of that fidelity with the lowest finite E, or null.
+const json* lowestEvaluation(const json& evaluated, const char* fidelity) {
+    const json* lowest = nullptr;
+    for (const json& e : evaluated)
+        if (e.at("fidelity") == fidelity && !e.at("E").is_null() &&
+            (!lowest || e.at("E").get<double>() < lowest->at("E").get<double>()))
+            lowest = &e;
+    return lowest;
+}
+
 }  // namespace
 
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
@@ -416,11 +426,7 @@ std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<Pl
 // η = 3, 48³), so scaling by the frame count alone predicted 1.2–1.4× too little at η = 1–3.
 double predictedFullEvaluationSeconds(const json& evaluated, int coarseResolution, int fullResolution,
                                       int coarseFrames, int fullFrames) {
-    const json* coarseBest = nullptr;
-    for (const json& e : evaluated)
-        if (e.at("fidelity") == kCoarse && !e.at("E").is_null() &&
-            (!coarseBest || e.at("E").get<double>() < coarseBest->at("E").get<double>()))
-            coarseBest = &e;
+    const json* coarseBest = lowestEvaluation(evaluated, kCoarse);
     double sum = 0;
     int count = 0;
     for (const json& e : evaluated) {
@@ -584,11 +590,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 }
             return json{{"theta", {lowest->first}}, {"E", lowest->second}, {"grid_shift", shift}};
         }
-        const json* best = nullptr;
-        for (const json& e : evaluated)
-            if (e.at("fidelity") == fidelity && !e.at("E").is_null() &&
-                (!best || e.at("E").get<double>() < best->at("E").get<double>()))
-                best = &e;
+        const json* best = lowestEvaluation(evaluated, fidelity);
         return best ? json{{"theta", best->at("theta")}, {"E", best->at("E")}, {"grid_shift", best->value("grid_shift", 0.0)}}
                     : json();
     };
