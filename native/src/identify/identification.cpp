@@ -132,14 +132,19 @@ double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo
 // differently from all of it (truth 10 against a 64³ reference: frames 1–19 favour 9.2–9.8, frames
 // 21–39 favour 7.7), so the fine phase searches a log-space spread of ln 1.4 around the coarse best.
 constexpr double kCoarseToFineShift = 0.35;
-// With a time budget, the coarse phase may use at most half of it, and no more than leaves time for
+// With a time budget, the coarse phase may use at most 35 % of it, and no more than leaves time for
 // the minimum full-fidelity generations. When the coarse grid was 32³, their (r/r_c)⁴ prediction
 // was 190 s per generation where 125–139 s were measured, and the reservation alone left the coarse
-// phase a single generation in a 10-minute run; hence the cap. On the same grid over a third of the
+// phase a single generation in a 10-minute run; hence the cap. Half the budget was too much once
+// the grid placements took turns by generation: each placement then gets every other full
+// generation, and at η = 300 on the sample cup (a scan and 7 more coarse generations, whose E over
+// the first third of the clip steps between a few values, the best found in the 6th) the half-cell
+// placement got one, and θ* sat 5.0 % high; with 35 % (a scan and 3 more) it got two, and 0.4 %.
+// On the same grid over a third of the
 // clip, scaled by the frame count alone, the prediction was low instead (the first frames are the
 // cheapest): 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³, η = 10, and
 // 160 against 200–230 s at η = 3; see fineGenerationSeconds for the better prediction, and the margin.
-constexpr double kCoarseBudgetShare = 0.5;
+constexpr double kCoarseBudgetShare = 0.35;
 constexpr double kFineTimeMargin = 1.15;
 // Closer than this in ln θ (0.3 %), a parabolic proposal repeats an evaluation (see parabolicProposal).
 constexpr double kProposalSpacing = 3e-3;
