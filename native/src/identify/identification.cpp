@@ -140,8 +140,9 @@ constexpr double kCoarseToFineShift = 0.35;
 // generation, and at η = 300 on the sample cup (a scan and 7 more coarse generations, whose E over
 // the first third of the clip steps between a few values, the best found in the 6th) the half-cell
 // placement got one, and θ* sat 5.0 % high; with 35 % (a scan and 3 more) it got two, and 0.4 %.
-// On the same grid over a third of the
-// clip, scaled by the frame count alone, the prediction was low instead (the first frames are the
+// (η = 1, whose full-fidelity E is flat within its jitter, went from 3.7 to 10.5 % with the same
+// two full generations; see the README's Table 1.) On the same grid over a third of the clip,
+// scaled by the frame count alone, the prediction was low instead (the first frames are the
 // cheapest): 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³, η = 10, and
 // 160 against 200–230 s at η = 3; see fineGenerationSeconds for the better prediction, and the margin.
 constexpr double kCoarseBudgetShare = 0.35;
