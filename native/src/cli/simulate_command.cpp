@@ -29,18 +29,6 @@ std::string frameName(const char* prefix, int frame, const char* ext) {
     return name;
 }
 
-std::string fileDigest(const std::filesystem::path& file) {
-    std::ifstream in(file, std::ios::binary);
-    if (!in) throw std::runtime_error(file.string() + ": cannot read");
-    std::uint64_t hash = 1469598103934665603ull;
-    std::vector<char> buffer(1 << 16);
-    while (in.read(buffer.data(), std::streamsize(buffer.size())) || in.gcount() > 0)
-        for (std::streamsize i = 0; i < in.gcount(); ++i) hash = (hash ^ static_cast<unsigned char>(buffer[i])) * 1099511628211ull;
-    char text[17];
-    std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(hash));
-    return text;
-}
-
 namespace {
 
 // The running engine's build: a run resumed or kept must be one this code would make.

@@ -2,15 +2,13 @@
 #pragma once
 
 #include "cli/progress.h"
+#include "scene/digest.h"
 #include "scene/scene.h"
 
 #include <filesystem>
 #include <string>
 
 namespace viscoscope::cli {
-
-// A digest of the file's bytes (FNV-1a, hex): tells one run's or build's file from another's.
-std::string fileDigest(const std::filesystem::path& file);
 
 // "prefix_NNNNN.ext": the name of frame NNNNN's file (frame 0 is the initial state).
 std::string frameName(const char* prefix, int frame, const char* ext);

@@ -54,6 +54,7 @@
 // placement identified 105.2 and two in turn 101.7, in as many evaluations.
 #include "identify/identify.h"
 
+#include "scene/digest.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -68,7 +69,6 @@
 #include <functional>
 #include <iomanip>
 #include <map>
-#include <sstream>
 
 namespace viscoscope::identify {
 
@@ -102,7 +102,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 std::string fingerprint(const Job& job) {
-    // FNV-1a over the job document and the resolved inputs that change E.
+    // A digest of the job document and the resolved inputs that change E.
     // Settings that change neither E nor the CMA-ES state may differ between runs of one job.
     json doc = job.document;
     for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun", "time_budget_s"}) doc.erase(key);
@@ -115,12 +115,7 @@ std::string fingerprint(const Job& job) {
     doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
     doc["_grid_placements"] = job.gridPlacements;
     doc["_grid_placement_schedule"] = placementScheduleName(job.placementSchedule);
-    const std::string text = doc.dump();
-    std::uint64_t hash = 1469598103934665603ull;
-    for (unsigned char c : text) hash = (hash ^ c) * 1099511628211ull;
-    std::ostringstream out;
-    out << std::hex << std::setw(16) << std::setfill('0') << hash;
-    return out.str();
+    return Digest().add(doc.dump()).hex();
 }
 
 double clipped(double x, double lo, double hi) { return std::min(hi, std::max(lo, x)); }
