@@ -4,9 +4,10 @@
 // (exactly as identify's full-fidelity evaluations, all cores), prints E per pair, each shift's
 // minimum of identify's profile parabola (in 1/θ for viscosity, else ln θ), and the minimum of the
 // mean over the shifts; with a scalar track in E, the same again for the silhouettes alone (E
-// without the track's term), to tell which term places the minimum. A job whose grid_placement_schedule is each_evaluation scores each pair as
-// identify does, the mean over its grid_placements, each moved by the pair's shift too; by
-// generation (the default), the pair's shift alone.
+// without the track's term), to tell which term places the minimum. A job whose
+// grid_placement_schedule is each_evaluation scores each pair as identify does, the mean over its
+// grid_placements, each moved by the pair's shift too; by generation (the default), the pair's
+// shift alone.
 //
 //   identify_landscape_bench --job JOB.json --work DIR --thetas 7,8,9,10,11,12.5 [--shifts 0,0.25,0.5,0.75]
 //
