@@ -160,10 +160,10 @@ struct Job {
     int populationSize = 0;  // 0 = CMA-ES default
     double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (≈ 0.1 % in θ)
     double toleranceFun = 1e-9; // ... or when best E over the last 10 fine generations changes < this
-    // Wall seconds for the whole identification (0 = none). The coarse phase ends by half of it, and
-    // after the minimum fine generations no generation starts that is predicted to end past it
-    // (from the mean time of the fine generations so far). With a budget the result depends on the
-    // machine's speed.
+    // Wall seconds for the whole identification (0 = none). The coarse phase ends by 35 % of it
+    // (kCoarseBudgetShare), and after the minimum fine generations no generation starts that is
+    // predicted to end past it (from the mean time of the fine generations so far, with a margin).
+    // With a budget the result depends on the machine's speed.
     double timeBudget = 0;
     int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
     // Mesh + fill ("exact", the default) or the band splat ("fast"). The splat fills every pixel a
