@@ -122,6 +122,7 @@ def one_row(args, eta, work):
         "seed": args.seed,
         "grid_placements": args.grid_placements,
         "grid_placement_schedule": args.placement_schedule,
+        "area_track_weight": args.area_track_weight,
     }
     (work / "job.json").write_text(json.dumps(job, indent=1))
     identify = [args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress", "none",
@@ -194,6 +195,9 @@ def main():
     parser.add_argument("--placement-schedule", choices=["each_evaluation", "by_generation"], default="by_generation",
                         help="grid_placement_schedule of the job: every evaluation on all placements, or one per "
                              "full-fidelity generation in turn")
+    parser.add_argument("--area-track-weight", type=float, default=1,
+                        help="area_track_weight of the job: the reference's silhouette area over time in E "
+                             "(0 = the silhouettes alone)")
     parser.add_argument("--time-budget", type=float, default=600,
                         help="time_budget_s of the job: wall seconds for the search (0 = none)")
     parser.add_argument("--eta-min", type=float, default=0.1)
