@@ -48,18 +48,7 @@ Reading settle(int resolution, int frames, double viscosity, double sigma, bool 
         {"frames", frames},
         {"seed", 3}};
     sim::Simulation s(parseScene(doc, "capillary bench"));
-    sim::Particles& p = s.particles();
-    size_t kept = 0;
-    for (size_t i = 0; i < p.position.size(); ++i) {
-        if (!keep(p.position[i])) continue;
-        p.position[kept] = p.position[i];
-        p.velocity[kept] = p.velocity[i];
-        p.affine[kept] = p.affine[i];
-        ++kept;
-    }
-    p.position.resize(kept);
-    p.velocity.resize(kept);
-    p.affine.resize(kept);
+    sim::keepParticles(s.particles(), keep);
     for (int f = 0; f < frames; ++f) s.advanceFrame();
 
     const double dx = s.grid().dx, volume = s.liquidVolume();

@@ -199,18 +199,7 @@ TEST(Physics, DropCarriesLaplacePressure) {
     doc["material"]["surface_tension"] = sigma;
     sim::Simulation s(parseScene(doc, "drop"));
     const Vec3 centre = Vec3::Constant(0.02);
-    sim::Particles& p = s.particles();
-    size_t kept = 0;  // carve the sphere out of the seeded block
-    for (size_t i = 0; i < p.position.size(); ++i) {
-        if ((p.position[i] - centre).norm() > radius) continue;
-        p.position[kept] = p.position[i];
-        p.velocity[kept] = p.velocity[i];
-        p.affine[kept] = p.affine[i];
-        ++kept;
-    }
-    p.position.resize(kept);
-    p.velocity.resize(kept);
-    p.affine.resize(kept);
+    sim::keepParticles(s.particles(), [&](const Vec3& x) { return (x - centre).norm() <= radius; });
     for (int f = 0; f < 3; ++f) s.advanceFrame();
     const double measuredRadius = std::cbrt(3 * s.liquidVolume() / (4 * M_PI));
     const auto& cells = s.fractions().cell;

@@ -12,6 +12,7 @@
 #include <openvdb/openvdb.h>
 
 #include <filesystem>
+#include <functional>
 #include <iosfwd>
 #include <memory>
 #include <optional>
@@ -39,6 +40,9 @@ struct Particles {
     std::vector<Vec3> velocity;
     std::vector<Eigen::Matrix3d> affine;  // APIC C_p: row a is the gradient of velocity component a
 };
+// Keeps, in their order, the particles whose position `keep` accepts: carves a shape of liquid out
+// of a seeded block.
+void keepParticles(Particles& particles, const std::function<bool(const Vec3&)>& keep);
 
 struct StepStats {
     double dt = 0;
@@ -119,7 +123,7 @@ public:
     const Scene& scene() const { return scene_; }
     const Grid& grid() const { return grid_; }
     const Particles& particles() const { return particles_; }
-    Particles& particles() { return particles_; }  // to set initial velocities
+    Particles& particles() { return particles_; }  // to set initial velocities, or carve (keepParticles)
     const StokesState& fields() const { return state_; }  // velocity on faces, pressure at cells
     const VolumeFractions& fractions() const { return fractions_; }
     double time() const { return time_; }

@@ -383,6 +383,20 @@ openvdb::FloatGrid::Ptr particleLevelSet(const std::vector<Vec3>& positions, dou
     return grid;
 }
 
+void keepParticles(Particles& particles, const std::function<bool(const Vec3&)>& keep) {
+    size_t kept = 0;
+    for (size_t p = 0; p < particles.position.size(); ++p) {
+        if (!keep(particles.position[p])) continue;
+        particles.position[kept] = particles.position[p];
+        particles.velocity[kept] = particles.velocity[p];
+        particles.affine[kept] = particles.affine[p];
+        ++kept;
+    }
+    particles.position.resize(kept);
+    particles.velocity.resize(kept);
+    particles.affine.resize(kept);
+}
+
 void Simulation::seedParticles() {
     const int perCell = scene_.solver.particlesPerCell;
     const int perAxis = static_cast<int>(std::round(std::cbrt(perCell)));
