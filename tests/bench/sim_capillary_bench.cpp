@@ -21,7 +21,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <functional>
 #include <vector>
 
 using namespace viscoscope;
@@ -34,9 +33,10 @@ struct Reading {
     double radiusCells, pressure, laplace, spuriousSpeed;
 };
 
-// Simulates the liquid of the seeded box that `keep` accepts, and reads it as above.
-Reading settle(int resolution, int frames, double viscosity, double sigma, bool drop,
-               const std::function<bool(const sim::Vec3&)>& keep, const sim::Vec3& centre) {
+// Carves a drop or a cylinder (along z) of `carveRadius` (m) around `centre` out of the seeded box,
+// simulates it, and reads it as above.
+Reading settle(int resolution, int frames, double viscosity, double sigma, bool drop, double carveRadius,
+               const sim::Vec3& centre) {
     const nlohmann::json doc = {
         {"format", "viscoscope.scene"},
         {"version", 1},
@@ -48,7 +48,9 @@ Reading settle(int resolution, int frames, double viscosity, double sigma, bool 
         {"frames", frames},
         {"seed", 3}};
     sim::Simulation s(parseScene(doc, "capillary bench"));
-    sim::keepParticles(s.particles(), keep);
+    sim::keepParticles(s.particles(), [&](const sim::Vec3& x) {
+        return (drop ? (x - centre).norm() : (x - centre).head<2>().norm()) <= carveRadius;
+    });
     for (int f = 0; f < frames; ++f) s.advanceFrame();
 
     const double dx = s.grid().dx, volume = s.liquidVolume();
@@ -94,11 +96,8 @@ int main(int argc, char** argv) {
         std::printf("%-9s %8.2f %12.3f %12.3f %8.3f %14.3f\n", shape, r.radiusCells, r.pressure, r.laplace,
                     r.pressure / r.laplace, r.spuriousSpeed);
     };
-    const double dropRadius = 0.2 * kBox;
-    print("drop", settle(resolution, frames, viscosity, sigma, true,
-                         [&](const sim::Vec3& x) { return (x - centre).norm() <= dropRadius; }, centre));
+    print("drop", settle(resolution, frames, viscosity, sigma, true, 0.2 * kBox, centre));
     for (const double cells : radii)
-        print("cylinder", settle(resolution, frames, viscosity, sigma, false,
-                                 [&](const sim::Vec3& x) { return (x - centre).head<2>().norm() <= cells * dx; }, centre));
+        print("cylinder", settle(resolution, frames, viscosity, sigma, false, cells * dx, centre));
     return 0;
 }
