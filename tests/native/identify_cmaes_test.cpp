@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <random>
 #include <vector>
 
 namespace {
@@ -237,4 +238,33 @@ TEST(PlacementMeanProfile, AveragesThePlacementsLinesAtEveryPoint) {
     const auto apart = placementMeanProfile({{10, 1, 0}, {11, 2, 0}, {20, 3, 0.5}, {21, 4, 0.5}}, true);
     ASSERT_EQ(apart.size(), 2u);
     EXPECT_TRUE((apart[0].first == 10 || apart[0].first == 11) && (apart[1].first == 10 || apart[1].first == 11));
+}
+
+// The profile's band is ΔE = 2 × E's jitter wide, so the jitter must not be read low from few
+// points. Five noisy samples of a parabola, as a short run's profile has: the mean of the jitter²
+// over many draws is the noise's variance. The residuals' RMS over all five points (what the band
+// used before) averages 2/5 of it, and the interval came out about 0.8× as wide as it should.
+TEST(ProfileFit, JitterEstimatesTheNoiseInEFromFivePoints) {
+    using viscoscope::identify::fitProfile;
+    constexpr double kNoise = 0.002, kTruth = 1.0;
+    const std::vector<double> thetas{0.7, 0.84, 0.9, 0.98, 1.2};
+    std::mt19937 random(7);
+    std::normal_distribution<double> noise(0, kNoise);
+    constexpr int kDraws = 4000;
+    double meanSquare = 0;
+    int fits = 0;
+    for (int draw = 0; draw < kDraws; ++draw) {
+        std::vector<std::pair<double, double>> points;
+        for (double theta : thetas) points.emplace_back(theta, 0.045 + 0.04 * std::pow(1 / theta - 1 / kTruth, 2) + noise(random));
+        nlohmann::json info;
+        fitProfile(points, 0.9, 0.5, true, info);
+        if (!info.contains("jitter")) continue;
+        meanSquare += std::pow(info["jitter"].get<double>(), 2);
+        ++fits;
+    }
+    ASSERT_EQ(fits, kDraws);  // the jitter is reported whether or not the fit is convex
+    const double ratio = meanSquare / fits / (kNoise * kNoise);
+    std::printf("mean jitter² / noise variance over %d draws of five points: %.3f\n", fits, ratio);
+    // The mean of χ²₂/2 over 4000 draws: 1 ± 0.016 (one standard deviation).
+    EXPECT_NEAR(ratio, 1.0, 0.06);
 }

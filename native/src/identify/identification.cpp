@@ -324,15 +324,18 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
         highest = std::max(highest, near[i].first);
     }
     const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
-    const double rms = std::sqrt((A * coef - y).squaredNorm() / near.size());
-    const double rSquared = 1 - (A * coef - y).squaredNorm() / (y.array() - y.mean()).square().sum();
+    const double squaredResiduals = (A * coef - y).squaredNorm();
+    const double rSquared = 1 - squaredResiduals / (y.array() - y.mean()).square().sum();
+    // E's jitter: the residuals' spread over the n − 3 degrees of freedom the fit leaves. Their RMS
+    // over n reads it √((n − 3)/n) low, 0.63× with the five points a short run often has.
+    const double jitter = std::sqrt(squaredResiduals / (near.size() - 3));
     info["coefficients"] = {coef[0], coef[1], coef[2]};
-    info["rms_residual"] = rms;
+    info["jitter"] = jitter;
     info["r_squared"] = rSquared;
     if (!(coef[2] > 0)) return std::nullopt;
     const double u0 = -coef[1] / (2 * coef[2]);
     const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
-    const double dE = std::max(2 * rms, 0.01 * std::abs(eMin));
+    const double dE = std::max(2 * jitter, 0.01 * std::abs(eMin));
     const double half = std::sqrt(dE / coef[2]);
     const double uMin = u(thetaBest) + u0;
     info["delta_E"] = dE;
@@ -949,7 +952,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         entry["interval"] = band;
         std::string method = profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
                                        "over full-fidelity evaluations within ±0.5 in ln θ of the best "
-                                       "one, band where it is within ΔE = max(2·RMS residual, 1 % E_min) "
+                                       "one, band where it is within ΔE = max(2·jitter, 1 % E_min) "
                                        "of its minimum"
                                      : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
         if (alignmentSpread)

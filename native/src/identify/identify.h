@@ -280,7 +280,7 @@ Evaluation evaluate(const Job& job, const Observation& observation, const std::v
 // its valley is steeper below the truth than above, and a parabola there puts the vertex high
 // (measured: +2.3 % and +10.1 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
 // parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
-// 2 × the RMS residual of the fit (the jitter in E), at least 1 % of E_min.
+// 2 × the jitter in E (the residuals' standard deviation, √(Σr²/(n − 3))), at least 1 % of E_min.
 struct ProfileFit {
     double vertex = 0;                 // θ at the parabola's minimum
     std::array<double, 2> interval{};  // θ
