@@ -6,9 +6,9 @@ cd "$(dirname "$0")/.."
 
 engine_packages=(build-essential cmake pkg-config libeigen3-dev libsuitesparse-dev libopenvdb-dev
   libboost-iostreams-dev libopencv-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev
-  libbenchmark-dev libnlopt-cxx-dev ffmpeg)
+  libbenchmark-dev libnlopt-cxx-dev ffmpeg mpi-default-dev)
 test_packages=(blender python3-pytest python3-numpy python3-matplotlib xvfb xauth libegl-mesa0
-  libgl1-mesa-dri)
+  libgl1-mesa-dri mpi-default-bin)
 
 packages=("${engine_packages[@]}")
 [ "${1:-engine}" = all ] && packages+=("${test_packages[@]}")

@@ -1,6 +1,7 @@
 // `viscoscope identify` as the add-on runs it: bad jobs fail fast with exit 2 and one line; a run
 // killed with SIGKILL between generations resumes to the same result as an uninterrupted run;
-// SIGTERM checkpoints and exits 3; progress is JSON lines with the fields the add-on reads.
+// SIGTERM checkpoints and exits 3; progress is JSON lines with the fields the add-on reads. Under
+// mpirun, ranks share the evaluations and the result is the single process's.
 // Tiny problem: 16³ (coarse 11³) grid, 2–3 reference frames, λ = 4, 2–3 generations. The reference
 // masks here are hand-drawn PGM rectangles (this test links no OpenCV); identify_loop_test checks
 // the recovered viscosity on a simulated reference.
@@ -13,10 +14,12 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -26,6 +29,7 @@ using json = nlohmann::json;
 namespace {
 
 using viscoscope::cli_test::CommandResult;
+using viscoscope::cli_test::runCommand;
 using viscoscope::cli_test::runViscoscope;
 using viscoscope::cli_test::slurp;
 
@@ -343,3 +347,56 @@ TEST_F(CliIdentify, ACheckpointOfAnotherJobIsRefusedAndMoreGenerationsContinue) 
 }
 
 }  // namespace
+
+// Three ranks deal each generation's four evaluations out among themselves (rank 0 takes two), and
+// every evaluation, θ*, E and the fields θ*'s run wrote come out as in a single process.
+TEST_F(CliIdentify, MpiRanksShareTheEvaluationsAndGiveTheSingleProcessResult) {
+#ifndef VISCOSCOPE_MPIEXEC
+    GTEST_SKIP() << "built without MPI (Debian's mpi-default-dev)";
+#else
+    const fs::path jobFile = writeJob(job(3));
+    const CommandResult single = run("identify " + jobFile.string() + " --out " + (dir_ / "single").string() +
+                                     " --progress json --no-plots --threads 1");
+    ASSERT_EQ(single.exitCode, 0) << single.err;
+    // Open MPI runs as root only when told twice; three ranks on two cores need --oversubscribe.
+    const std::string mpirun = "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 timeout 600 " +
+                               std::string(VISCOSCOPE_MPIEXEC) + " --oversubscribe -n 3 " + VISCOSCOPE_CLI;
+    const CommandResult ranks = runCommand(mpirun + " identify " + jobFile.string() + " --out " +
+                                               (dir_ / "ranks").string() + " --progress json --no-plots --threads 1",
+                                           dir_);
+    ASSERT_EQ(ranks.exitCode, 0) << ranks.err;
+    const json a = json::parse(slurp(dir_ / "single" / "result.json"));
+    const json b = json::parse(slurp(dir_ / "ranks" / "result.json"));
+    EXPECT_EQ(b.at("viscosity").at("value"), a.at("viscosity").at("value"));
+    EXPECT_EQ(b.at("viscosity").at("interval"), a.at("viscosity").at("interval"));
+    EXPECT_EQ(b.at("E"), a.at("E"));
+    ASSERT_EQ(b.at("evaluated").size(), a.at("evaluated").size());
+    std::map<int, int> perRank;
+    for (size_t i = 0; i < a.at("evaluated").size(); ++i) {
+        EXPECT_EQ(b["evaluated"][i]["theta"], a["evaluated"][i]["theta"]) << i;
+        EXPECT_EQ(b["evaluated"][i]["E"], a["evaluated"][i]["E"]) << i;
+        EXPECT_EQ(b["evaluated"][i]["frame_E"], a["evaluated"][i]["frame_E"]) << i;
+        EXPECT_FALSE(a["evaluated"][i].contains("rank"));
+        ++perRank[b["evaluated"][i].value("rank", -1)];
+    }
+    std::printf("[ mpi      ] %zu evaluations on ranks 0/1/2: %d/%d/%d; eta %.6g in both\n", b.at("evaluated").size(),
+                perRank[0], perRank[1], perRank[2], b.at("viscosity").at("value").get<double>());
+    EXPECT_EQ(perRank.count(-1), 0u);
+    EXPECT_GT(perRank[1], 0);
+    EXPECT_GT(perRank[2], 0);
+    // θ*'s fields, written by whichever rank ran it into the shared output folder.
+    auto vdbFiles = [](const fs::path& dir) {
+        std::vector<std::string> names;
+        if (fs::exists(dir))
+            for (const auto& entry : fs::directory_iterator(dir))
+                if (entry.path().extension() == ".vdb") names.push_back(entry.path().filename().string());
+        std::sort(names.begin(), names.end());
+        return names;
+    };
+    const std::vector<std::string> fields = vdbFiles(dir_ / "single" / "fields");
+    EXPECT_FALSE(fields.empty());
+    EXPECT_EQ(vdbFiles(dir_ / "ranks" / "fields"), fields);
+    EXPECT_EQ(b.at("fields").at("mean_ground_speed_m_s"), a.at("fields").at("mean_ground_speed_m_s"));
+    EXPECT_EQ(b.at("fields").at("source"), a.at("fields").at("source"));
+#endif
+}

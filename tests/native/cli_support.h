@@ -25,12 +25,16 @@ struct CommandResult {
     std::string out, err;
 };
 
+// A shell command line, its stdout and stderr kept in `dir`.
+inline CommandResult runCommand(const std::string& command, const std::filesystem::path& dir) {
+    const std::string redirected = command + " > " + (dir / "stdout").string() + " 2> " + (dir / "stderr").string();
+    const int status = std::system(redirected.c_str());
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir / "stdout"), slurp(dir / "stderr")};
+}
+
 // `viscoscope ARGUMENTS`, its stdout and stderr kept in `dir`.
 inline CommandResult runViscoscope(const std::string& arguments, const std::filesystem::path& dir) {
-    const std::string command = std::string(VISCOSCOPE_CLI) + " " + arguments + " > " + (dir / "stdout").string() +
-                                " 2> " + (dir / "stderr").string();
-    const int status = std::system(command.c_str());
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(dir / "stdout"), slurp(dir / "stderr")};
+    return runCommand(std::string(VISCOSCOPE_CLI) + " " + arguments, dir);
 }
 
 }  // namespace viscoscope::cli_test

@@ -1,7 +1,9 @@
 // `viscoscope identify job.json --out DIR`: CMA-ES over simulations (identify stage). Re-running
 // with the same --out resumes from DIR/checkpoint.json. SIGTERM/SIGINT: the current generation's
-// evaluations finish, the checkpoint is written and the command exits 3.
+// evaluations finish, the checkpoint is written and the command exits 3. Under mpirun the
+// evaluations are spread over the ranks (mpi_ranks.h).
 #include "cli/commands.h"
+#include "cli/mpi_ranks.h"
 #include "cli/progress.h"
 #include "cli/scripts.h"
 #include "identify/identify.h"
@@ -39,11 +41,26 @@ std::string makePlots(const fs::path& outDir) {
 int runIdentify(const IdentifyArguments& args) {
     openvdb::initialize();
     identify::Job job = identify::loadJob(args.job);
+    identify::IdentifyOptions options;
+#ifdef VISCOSCOPE_WITH_MPI
+    std::unique_ptr<MpiRanks> ranks;
+    if (launchedByMpi()) {
+        ranks = std::make_unique<MpiRanks>(args.threads);
+        if (ranks->rank() > 0) {
+            ranks->serve(args.job, args.outDir);
+            return kExitOk;
+        }
+        options.pool = ranks.get();
+    }
+#else
+    if (launchedByMpi())
+        throw InputError("started by mpirun, but this viscoscope was built without MPI (install Debian's "
+                         "mpi-default-dev and build again), and its ranks would each run the whole job");
+#endif
     const ProgressReporter progress(args.progress);
     Scene atJobResolution = job.scene;
     atJobResolution.domain.resolution = job.resolution;
     for (const std::string& warning : resolutionWarnings(atJobResolution)) progress.warn(warning);
-    identify::IdentifyOptions options;
     options.threads = args.threads;
     options.cancel = &g_cancelRequested;
     options.writeFields = !args.noFields;
@@ -93,7 +110,7 @@ Command addIdentifyCommand(CLI::App& app) {
     sub->add_option("--progress", args->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}))
         ->capture_default_str();
-    sub->add_option("--threads", args->threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
+    sub->add_option("--threads", args->threads, "Worker threads (0 = all cores), per rank under mpirun")->check(CLI::NonNegativeNumber);
     sub->add_flag("--no-plots", args->noPlots, "Do not draw convergence.png / landscape.png");
     sub->add_flag("--no-fields", args->noFields, "Do not write θ*'s fields/frame_*.vdb (full-fidelity evaluations then write nothing to disk)");
     return {sub, [args] { return runIdentify(*args); }};

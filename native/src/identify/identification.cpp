@@ -59,9 +59,6 @@
 #include "surface/surface.h"
 
 #include <Eigen/QR>
-#include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <chrono>
 #include <cmath>
@@ -179,31 +176,6 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
                          " image or lie behind the camera)");
 }
 
-
-// Evaluates every θ at once on the arena. An unstable simulation gets E = ∞ and its message in
-// `errors` (it ranks last, and never aborts the run); bad input still throws.
-std::vector<Evaluation> evaluateAll(tbb::task_arena& arena, const Job& job, const Observation& obs,
-                                    const std::vector<std::vector<double>>& thetas, int resolution,
-                                    const std::function<fs::path(size_t)>& fieldsDir, double gridShift,
-                                    std::vector<std::string>& errors) {
-    std::vector<Evaluation> evals(thetas.size());
-    errors.assign(thetas.size(), "");
-    arena.execute([&] {
-        tbb::parallel_for(0, static_cast<int>(thetas.size()), 1, [&](int k) {
-            try {
-                evals[k] = evaluate(job, obs, thetas[k], resolution, fieldsDir(k), gridShift);
-            } catch (const InputError&) {
-                throw;
-            } catch (const std::exception& e) {
-                evals[k].theta = thetas[k];
-                evals[k].resolution = resolution;
-                evals[k].E = INFINITY;
-                errors[k] = e.what();
-            }
-        });
-    });
-    return evals;
-}
 
 // The alignment check. The grid resolves a scene's small features unevenly: the sample cup's hole
 // is 2.4 cells in radius at 48³, and where the faces fall against its rim decides how much of it passes
@@ -488,7 +460,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     fs::create_directories(outDir);
     Job job = jobIn;
     prepareReference(job, outDir, options.cancel);
-    const Observation obs = loadObservation(job);
+    const Observations observations = observe(job);
+    const Observation& obs = observations.full;
+    const Observation& coarseObs = observations.coarse;
     const size_t informativeFrames = informativeSimFrames(obs).size();
     json warnings = json::array();
     if (informativeFrames < size_t(kMinInformativeFrames)) {
@@ -504,7 +478,6 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
-    const Observation coarseObs = firstPartOf(obs, job.fidelity.coarseTimeShare);
     const int fineFrames = lastSimFrame(obs), coarseFrames = lastSimFrame(coarseObs);
     const double coarseTolerance = 0.02 + 10 * job.toleranceX;
     const std::string print = fingerprint(job);
@@ -554,10 +527,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         requireCameraSeesLiquid(job, coarseEnd > 0 ? coarseRes : fineRes);
     }
 
-    std::optional<tbb::global_control> threadLimit;
-    if (options.threads > 0)
-        threadLimit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(options.threads));
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+    std::optional<ThreadPool> ownPool;
+    EvaluationPool& pool = options.pool ? *options.pool : ownPool.emplace(options.threads);
 
     // With placements by generation, full-fidelity generation g runs on the grid moved by
     // placementShift(g) cells, the job's placements in turn from the first one on.
@@ -611,17 +582,17 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // rounds of predictedFullEvaluationSeconds.
     auto fineGenerationSeconds = [&] {
         if (!genSecondsFine.empty()) return mean(genSecondsFine);
-        const double threads = arena.max_concurrency();
+        const double threads = pool.concurrency();
         return std::ceil(es.lambda() / threads) *
                predictedFullEvaluationSeconds(evaluated, coarseRes, fineRes, coarseFrames, fineFrames);
     };
-    // The alignment check's two evaluations, as a share of a full generation's rounds on the arena,
+    // The alignment check's two evaluations, as a share of a full generation's rounds in the pool,
     // with the margin the minimum generations get (at η = 1 on the sample cup: 61.5 s measured where
     // half the mean full-fidelity generation, 55 s, was predicted).
     const bool alignmentPlanned = job.alignmentCheck && n == 1;
     auto alignmentSeconds = [&] {
         if (!alignmentPlanned) return 0.0;
-        const double threads = arena.max_concurrency();
+        const double threads = pool.concurrency();
         return kFineTimeMargin * fineGenerationSeconds() * std::ceil(2 / threads) / std::ceil(es.lambda() / threads);
     };
     auto elapsedNow = [&] { return elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count(); };
@@ -700,12 +671,15 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const fs::path staging = outDir / kFieldsStaging;
         fs::remove_all(staging);  // what a killed generation left
         auto stagedFields = [&](size_t k) { return stageFields ? staging / std::to_string(k) : fs::path(); };
-        std::vector<std::vector<double>> thetas;
-        for (const Eigen::VectorXd& x : xs) thetas.push_back(thetaOf(x, bounds));
-        std::vector<std::string> errors;
-        const double gridShift = placementShift(g);
-        const std::vector<Evaluation> evals =
-            evaluateAll(arena, job, coarse ? coarseObs : obs, thetas, resolution, stagedFields, gridShift, errors);
+        EvaluationBatch batch{{}, coarse, resolution, placementShift(g), {}};
+        for (size_t k = 0; k < xs.size(); ++k) {
+            batch.thetas.push_back(thetaOf(xs[k], bounds));
+            batch.fieldsDirs.push_back(stagedFields(k));
+        }
+        const double gridShift = batch.gridShift;
+        const BatchResult ran = pool.evaluate(job, observations, batch);
+        const std::vector<Evaluation>& evals = ran.evaluations;
+        const std::vector<std::string>& errors = ran.errors;
         if (g == 0) {
             double pixels = 0;
             for (const Evaluation& e : evals) pixels += e.simulatedPixels;
@@ -734,6 +708,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                    {"origin", origins[k]}};
             if (byGeneration) e["grid_shift"] = gridShift;
             if (!errors[k].empty()) e["error"] = errors[k];
+            if (!ran.ranks.empty()) e["rank"] = ran.ranks[k];
             evaluated.push_back(e);
         }
         if (stageFields) {
@@ -911,16 +886,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             } else {
                 if (!cached) {
                     const auto checkStart = Clock::now();
-                    std::vector<std::string> errors;
-                    const std::vector<Evaluation> shifted =
-                        evaluateAll(arena, job, obs, {{thetas[0]}, {thetas[1]}}, fineRes,
-                                    [](size_t) { return fs::path(); }, checkShift, errors);
-                    const std::array<double, 2> E{shifted[0].E, shifted[1].E};
+                    const BatchResult shifted =
+                        pool.evaluate(job, observations, {{{thetas[0]}, {thetas[1]}}, false, fineRes, checkShift, {}});
+                    const std::array<double, 2> E{shifted.evaluations[0].E, shifted.evaluations[1].E};
                     alignmentCheckSeconds = std::chrono::duration<double>(Clock::now() - checkStart).count();
                     check["seconds"] = alignmentCheckSeconds;
                     alignmentScores = {{"theta", thetas},
                                        {"E", json::array({finiteOrNull(E[0]), finiteOrNull(E[1])})},
-                                       {"errors", errors}};
+                                       {"errors", shifted.errors}};
                     checkpoint(Clock::now());
                 }
                 std::array<double, 2> E{NAN, NAN};

@@ -17,6 +17,7 @@
 #include <atomic>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <random>
 #include <string>
@@ -271,6 +272,59 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 // simulated again.
 Evaluation evaluate(const Job& job, const Observation& observation, const std::vector<double>& theta,
                     int resolution, const std::filesystem::path& fieldsDir = {}, double gridShift = 0);
+// Evaluations travel between MPI ranks as JSON.
+nlohmann::json toJson(const Evaluation& evaluation);
+Evaluation evaluationFromJson(const nlohmann::json& doc);
+
+// ---------------------------------------------------------------------------------------------
+// Where the loop's evaluations run.
+
+// The reference as the full-fidelity and the coarse generations compare with it.
+struct Observations {
+    Observation full, coarse;
+};
+// Of a job whose reference is prepared (prepareReference): loadObservation and its first part
+// (firstPartOf with the job's fidelity.coarse_time_share).
+Observations observe(const Job& job);
+
+// The evaluations one step of the loop asks for: every θ on one grid, at one fidelity.
+struct EvaluationBatch {
+    std::vector<std::vector<double>> thetas;
+    bool coarse = false;  // compared with Observations::coarse
+    int resolution = 0;
+    double gridShift = 0;
+    std::vector<std::filesystem::path> fieldsDirs;  // per θ (empty path: no fields); empty: none
+    nlohmann::json toJson() const;
+    static EvaluationBatch fromJson(const nlohmann::json& doc);
+};
+// In the batch's order. A simulation that fails gets E = ∞ and its message in `errors` (it ranks
+// last and never aborts the run); bad input throws InputError.
+struct BatchResult {
+    std::vector<Evaluation> evaluations;
+    std::vector<std::string> errors;
+    std::vector<int> ranks;  // the MPI rank each ran on; empty when all ran in this process
+};
+
+class EvaluationPool {
+public:
+    virtual ~EvaluationPool() = default;
+    virtual BatchResult evaluate(const Job& job, const Observations& observations, const EvaluationBatch& batch) = 0;
+    // How many evaluations run at once (the time budget's rounds per generation).
+    virtual int concurrency() const = 0;
+};
+
+// This process's threads: every θ of a batch at once, on up to `threads` of them (0 = all cores).
+class ThreadPool : public EvaluationPool {
+public:
+    explicit ThreadPool(int threads);
+    ~ThreadPool() override;
+    BatchResult evaluate(const Job& job, const Observations& observations, const EvaluationBatch& batch) override;
+    int concurrency() const override;
+
+private:
+    struct Threads;
+    std::unique_ptr<Threads> threads_;
+};
 
 // The profile of E around the best full-fidelity evaluation θ_b of a single parameter: a
 // least-squares parabola E ≈ a + b u + c u² over the points (θ, E) with |ln θ − ln θ_b| ≤ `range`
@@ -365,6 +419,9 @@ struct IdentificationResult {
 
 struct IdentifyOptions {
     int threads = 0;  // 0 = all cores (tbb default)
+    // Where evaluations run; null: a ThreadPool of `threads`. `viscoscope identify` under mpirun
+    // passes one that spreads each batch over the ranks (cli/mpi_ranks.h).
+    EvaluationPool* pool = nullptr;
     std::function<void(const GenerationReport&)> onGeneration;
     std::function<void(const std::string&)> onWarning;  // a result the user should doubt, and why
     const std::atomic<bool>* cancel = nullptr;

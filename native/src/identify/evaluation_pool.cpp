@@ -1,0 +1,121 @@
+// Where the loop's evaluations run: this process's threads (ThreadPool), and the JSON an
+// evaluation and a batch travel as between MPI ranks (cli/mpi_ranks.cpp).
+#include "identify/identify.h"
+
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <cmath>
+#include <optional>
+
+namespace viscoscope::identify {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+json toJson(const Evaluation& e) {
+    json doc{{"theta", e.theta},
+             {"resolution", e.resolution},
+             {"E", std::isfinite(e.E) ? json(e.E) : json()},  // JSON has no infinity
+             {"frame_E", e.frameE},
+             {"simulated_pixels", e.simulatedPixels},
+             {"seconds", e.seconds},
+             {"simulation_s", e.simulationSeconds},
+             {"silhouette_s", e.silhouetteSeconds},
+             {"fields_s", e.fieldsSeconds},
+             {"frame_s", e.frameSeconds}};
+    if (e.fields)
+        doc["fields"] = {{"frames", e.fields->frames},
+                         {"mean_ground_speed", e.fields->meanGroundSpeed},
+                         {"ground_frames", e.fields->groundFrames}};
+    return doc;
+}
+
+Evaluation evaluationFromJson(const json& doc) {
+    Evaluation e;
+    e.theta = doc.at("theta").get<std::vector<double>>();
+    e.resolution = doc.at("resolution").get<int>();
+    e.E = doc.at("E").is_null() ? INFINITY : doc.at("E").get<double>();
+    e.frameE = doc.at("frame_E").get<std::vector<double>>();
+    e.simulatedPixels = doc.at("simulated_pixels").get<double>();
+    e.seconds = doc.at("seconds").get<double>();
+    e.simulationSeconds = doc.at("simulation_s").get<double>();
+    e.silhouetteSeconds = doc.at("silhouette_s").get<double>();
+    e.fieldsSeconds = doc.at("fields_s").get<double>();
+    e.frameSeconds = doc.at("frame_s").get<std::vector<double>>();
+    if (doc.contains("fields")) {
+        const json& f = doc.at("fields");
+        e.fields = FieldsSummary{f.at("frames").get<int>(), f.at("mean_ground_speed").get<double>(),
+                                 f.at("ground_frames").get<int>()};
+    }
+    return e;
+}
+
+json EvaluationBatch::toJson() const {
+    json dirs = json::array();
+    for (const fs::path& dir : fieldsDirs) dirs.push_back(dir.string());
+    return {{"thetas", thetas}, {"coarse", coarse}, {"resolution", resolution}, {"grid_shift", gridShift},
+            {"fields_dirs", dirs}};
+}
+
+EvaluationBatch EvaluationBatch::fromJson(const json& doc) {
+    EvaluationBatch batch;
+    batch.thetas = doc.at("thetas").get<std::vector<std::vector<double>>>();
+    batch.coarse = doc.at("coarse").get<bool>();
+    batch.resolution = doc.at("resolution").get<int>();
+    batch.gridShift = doc.at("grid_shift").get<double>();
+    for (const json& dir : doc.at("fields_dirs")) batch.fieldsDirs.emplace_back(dir.get<std::string>());
+    return batch;
+}
+
+Observations observe(const Job& job) {
+    Observations observations;
+    observations.full = loadObservation(job);
+    observations.coarse = firstPartOf(observations.full, job.fidelity.coarseTimeShare);
+    return observations;
+}
+
+struct ThreadPool::Threads {
+    std::optional<tbb::global_control> limit;
+    std::unique_ptr<tbb::task_arena> arena;
+};
+
+ThreadPool::ThreadPool(int threads) : threads_(std::make_unique<Threads>()) {
+    if (threads > 0)
+        threads_->limit.emplace(tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+    const int concurrency = threads > 0 ? threads : int{tbb::task_arena::automatic};
+    threads_->arena = std::make_unique<tbb::task_arena>(concurrency);
+}
+
+ThreadPool::~ThreadPool() = default;
+
+int ThreadPool::concurrency() const { return threads_->arena->max_concurrency(); }
+
+BatchResult ThreadPool::evaluate(const Job& job, const Observations& observations, const EvaluationBatch& batch) {
+    const Observation& observation = batch.coarse ? observations.coarse : observations.full;
+    const int count = static_cast<int>(batch.thetas.size());
+    BatchResult result;
+    result.evaluations.resize(count);
+    result.errors.assign(count, "");
+    threads_->arena->execute([&] {
+        tbb::parallel_for(0, count, 1, [&](int k) {
+            const fs::path fieldsDir = batch.fieldsDirs.empty() ? fs::path() : batch.fieldsDirs[k];
+            try {
+                result.evaluations[k] = identify::evaluate(job, observation, batch.thetas[k], batch.resolution,
+                                                           fieldsDir, batch.gridShift);
+            } catch (const InputError&) {
+                throw;
+            } catch (const std::exception& e) {
+                Evaluation& failed = result.evaluations[k];
+                failed.theta = batch.thetas[k];
+                failed.resolution = batch.resolution;
+                failed.E = INFINITY;
+                result.errors[k] = e.what();
+            }
+        });
+    });
+    return result;
+}
+
+}  // namespace viscoscope::identify
