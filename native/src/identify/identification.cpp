@@ -692,20 +692,12 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         for (size_t k = 0; k < xs.size(); ++k) {
             fitness[k] = std::isfinite(evals[k].E) ? evals[k].E + boundPenalty(xs[k], bounds) : 1e30;
             if (fitness[k] < fitness[bestK]) bestK = static_cast<int>(k);
-            json e{{"generation", g + 1},
-                   {"fidelity", fidelity},
-                   {"resolution", resolution},
-                   {"frames", coarse ? coarseFrames : fineFrames},
-                   {"theta", vec(evals[k].theta)},
-                   {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
-                   {"E", finiteOrNull(evals[k].E)},
-                   {"frame_E", vec(evals[k].frameE)},
-                   {"frame_s", vec(evals[k].frameSeconds)},
-                   {"seconds", evals[k].seconds},
-                   {"simulation_s", evals[k].simulationSeconds},
-                   {"silhouette_s", evals[k].silhouetteSeconds},
-                   {"fields_s", evals[k].fieldsSeconds},
-                   {"origin", origins[k]}};
+            json e = toJson(evals[k]);
+            e.update({{"generation", g + 1},
+                      {"fidelity", fidelity},
+                      {"frames", coarse ? coarseFrames : fineFrames},
+                      {"x", vec(std::vector<double>(xs[k].data(), xs[k].data() + xs[k].size()))},
+                      {"origin", origins[k]}});
             if (byGeneration) e["grid_shift"] = gridShift;
             if (!errors[k].empty()) e["error"] = errors[k];
             if (!ran.ranks.empty()) e["rank"] = ran.ranks[k];
