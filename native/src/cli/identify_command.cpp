@@ -103,7 +103,8 @@ int runIdentify(const IdentifyArguments& args) {
 
 Command addIdentifyCommand(CLI::App& app) {
     auto args = std::make_shared<IdentifyArguments>();
-    CLI::App* sub = app.add_subcommand("identify", "Identify material parameters (viscosity) by CMA-ES over simulations");
+    CLI::App* sub = app.add_subcommand("identify", "Identify material parameters (viscosity) by CMA-ES over simulations; "
+                                                   "under mpirun the ranks share the evaluations");
     sub->add_option("job", args->job, "job.json (format viscoscope.job, version 1)")->required();
     sub->add_option("--out", args->outDir, "Output folder: result.json, checkpoint.json, plots, fields/ (resumes)")
         ->required();
