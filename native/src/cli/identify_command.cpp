@@ -47,7 +47,7 @@ int runIdentify(const IdentifyArguments& args) {
     if (launchedByMpi()) {
         ranks = std::make_unique<MpiRanks>(args.threads);
         if (ranks->rank() > 0) {
-            ranks->serve(args.job, args.outDir);
+            ranks->serve(job, args.outDir);
             return kExitOk;
         }
         options.pool = ranks.get();
@@ -111,7 +111,8 @@ Command addIdentifyCommand(CLI::App& app) {
     sub->add_option("--progress", args->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}))
         ->capture_default_str();
-    sub->add_option("--threads", args->threads, "Worker threads (0 = all cores), per rank under mpirun")->check(CLI::NonNegativeNumber);
+    sub->add_option("--threads", args->threads, "Worker threads (0 = all cores), per rank under mpirun")
+        ->check(CLI::NonNegativeNumber);
     sub->add_flag("--no-plots", args->noPlots, "Do not draw convergence.png / landscape.png");
     sub->add_flag("--no-fields", args->noFields, "Do not write θ*'s fields/frame_*.vdb (full-fidelity evaluations then write nothing to disk)");
     return {sub, [args] { return runIdentify(*args); }};

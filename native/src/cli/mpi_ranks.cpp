@@ -7,7 +7,6 @@
 #ifdef VISCOSCOPE_WITH_MPI
 #include <mpi.h>
 
-#include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -136,27 +135,26 @@ identify::BatchResult MpiRanks::evaluate(const identify::Job& job, const identif
     return result;
 }
 
-void MpiRanks::serve(const std::filesystem::path& jobFile, const std::filesystem::path& outDir) {
-    // The job as rank 0 runs it, read once rank 0 has prepared its reference (before its first batch).
-    std::optional<identify::Job> job;
+void MpiRanks::serve(const identify::Job& job, const std::filesystem::path& outDir) {
+    // The job as rank 0 runs it, once rank 0 has prepared its reference (before its first batch).
+    std::optional<identify::Job> prepared;
     std::optional<identify::Observations> observations;
     for (;;) {
         const json message = json::parse(broadcast(""));
         if (message.contains("stop")) return;
         const identify::EvaluationBatch batch = identify::EvaluationBatch::fromJson(message.at("batch"));
-        const std::vector<size_t> share = shareOf(batch, rank_, size_);
-        if (!job) {
+        if (!prepared) {
             try {
-                job = identify::loadJob(jobFile);
-                identify::prepareReference(*job, outDir);
-                observations = identify::observe(*job);
+                identify::Job copy = job;
+                identify::prepareReference(copy, outDir);
+                observations = identify::observe(copy);
+                prepared = std::move(copy);
             } catch (const InputError& e) {
-                job.reset();
                 sendToRankZero({{"input_error", "rank " + std::to_string(rank_) + ": " + e.what()}});
                 continue;
             }
         }
-        sendToRankZero(evaluateShare(*local_, *job, *observations, batch, share));
+        sendToRankZero(evaluateShare(*local_, *prepared, *observations, batch, shareOf(batch, rank_, size_)));
     }
 }
 

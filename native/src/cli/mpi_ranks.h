@@ -30,9 +30,9 @@ public:
     identify::BatchResult evaluate(const identify::Job& job, const identify::Observations& observations,
                                    const identify::EvaluationBatch& batch) override;
     int concurrency() const override { return concurrency_; }
-    // The other ranks' side, until rank 0 says stop: each batch's share, evaluated against the job
-    // in `jobFile` with the reference rank 0 prepared in `outDir`.
-    void serve(const std::filesystem::path& jobFile, const std::filesystem::path& outDir);
+    // The other ranks' side, until rank 0 says stop: each batch's share of `job`'s evaluations,
+    // against the reference rank 0 prepared in `outDir`.
+    void serve(const identify::Job& job, const std::filesystem::path& outDir);
 
 private:
     int rank_ = 0, size_ = 1, concurrency_ = 1;

@@ -272,7 +272,7 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 // simulated again.
 Evaluation evaluate(const Job& job, const Observation& observation, const std::vector<double>& theta,
                     int resolution, const std::filesystem::path& fieldsDir = {}, double gridShift = 0);
-// Evaluations travel between MPI ranks as JSON.
+// An evaluation as JSON: the core of its checkpoint record, and what it travels between MPI ranks as.
 nlohmann::json toJson(const Evaluation& evaluation);
 Evaluation evaluationFromJson(const nlohmann::json& doc);
 
