@@ -25,8 +25,6 @@
 #include <nlopt.hpp>
 #include <openvdb/openvdb.h>
 #include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
-#include <tbb/task_arena.h>
 
 #include <unistd.h>
 
@@ -51,7 +49,7 @@ constexpr double kTarget = 0.05;  // "within 5 % of the truth"
 
 struct Context {
     identify::Job job;
-    identify::Observation observation;
+    identify::Observations observations;
     identify::LogSearchSpace space;
     size_t viscosity = 0;  // index of the viscosity in θ
     double truth = 0;
@@ -82,7 +80,7 @@ double relativeError(const Context& c, const std::vector<double>& theta) {
 // A simulation that fails (unstable) gets E = ∞, as in identify; bad input propagates.
 identify::Evaluation simulate(const Context& c, const std::vector<double>& theta) {
     try {
-        return identify::evaluate(c.job, c.observation, theta, c.resolution);
+        return identify::evaluate(c.job, c.observations.full, theta, c.resolution);
     } catch (const InputError&) {
         throw;
     } catch (const std::exception&) {
@@ -114,16 +112,14 @@ Run runCmaEs(const Context& c, const Eigen::VectorXd& x0, std::uint64_t seed) {
     identify::CmaEsSettings settings;
     settings.populationSize = c.job.populationSize;
     identify::CmaEs es(x0, c.space.spread, seed, settings);
-    tbb::task_arena arena(c.threads > 0 ? c.threads : tbb::task_arena::automatic);
+    identify::ThreadPool pool(c.threads);
     const auto start = Clock::now();
     run.stop = "budget";
     while (es.evaluations() + es.lambda() <= c.budget) {  // whole generations only
         const std::vector<Eigen::VectorXd> xs = es.ask();
-        std::vector<identify::Evaluation> evals(xs.size());
-        arena.execute([&] {
-            tbb::parallel_for(0, static_cast<int>(xs.size()), 1,
-                              [&](int k) { evals[k] = simulate(c, identify::thetaOf(xs[k], c.space)); });
-        });
+        identify::EvaluationBatch batch{{}, false, c.resolution, 0, {}};
+        for (const Eigen::VectorXd& x : xs) batch.thetas.push_back(identify::thetaOf(x, c.space));
+        const std::vector<identify::Evaluation> evals = pool.evaluate(c.job, c.observations, batch).evaluations;
         std::vector<double> fitness(xs.size());
         for (size_t k = 0; k < xs.size(); ++k) {
             fitness[k] = std::isfinite(evals[k].E) ? evals[k].E + identify::boundPenalty(xs[k], c.space) : 1e30;
@@ -285,7 +281,7 @@ int main(int argc, char** argv) {
             extracted = fs::temp_directory_path() / ("viscoscope_optimizer_bench_" + std::to_string(getpid()));
             identify::prepareReference(c.job, extracted);
         }
-        c.observation = identify::loadObservation(c.job);
+        c.observations = identify::observe(c.job);
         c.space = identify::logSearchSpace(c.job);
         c.truth = truth;
         c.resolution = resolution > 0 ? resolution : c.job.resolution;
