@@ -390,7 +390,8 @@ std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<Pl
     }
     if (lines.size() > 1 && !profile.empty()) return profile;
     profile.clear();
-    for (const auto& [x, node] : lines.front().second) profile.emplace_back(node.theta, node.E());
+    for (const auto& [shift, line] : lines)
+        for (const auto& [x, node] : line) profile.emplace_back(node.theta, node.E());
     return profile;
 }
 
