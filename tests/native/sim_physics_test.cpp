@@ -671,15 +671,10 @@ TEST(Physics, HuppertViscousGravityCurrent) {
     doc["fps"] = 4;
     Scene scene = parseScene(doc, "huppert");
     sim::Simulation s(scene);
-    sim::Particles& p = s.particles();
-    for (size_t i = p.position.size(); i-- > 0;) {
-        const double xi2 = (std::pow(p.position[i].x(), 2) + std::pow(p.position[i].y(), 2)) / (rStart * rStart);
-        if (xi2 >= 1 || p.position[i].z() > hStart * std::cbrt(1 - xi2)) {
-            p.position.erase(p.position.begin() + i);
-            p.velocity.erase(p.velocity.begin() + i);
-            p.affine.erase(p.affine.begin() + i);
-        }
-    }
+    sim::keepParticles(s.particles(), [&](const Vec3& x) {
+        const double xi2 = (x.x() * x.x() + x.y() * x.y()) / (rStart * rStart);
+        return xi2 < 1 && x.z() <= hStart * std::cbrt(1 - xi2);
+    });
     // r_N from the particles, two ways. The second moment: for the similarity profile ⟨r²⟩ = (3/7) r_N²
     // over the volume, dominated by the resolved bulk. The 95th percentile: the volume beyond
     // ξ = r/r_N is (1 − ξ²)^{4/3}, so r_95 = r_N √(1 − 0.05^{3/4}); it reads the thin front, which
