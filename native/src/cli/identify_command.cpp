@@ -40,7 +40,14 @@ std::string makePlots(const fs::path& outDir) {
 
 int runIdentify(const IdentifyArguments& args) {
     openvdb::initialize();
-    identify::Job job = identify::loadJob(args.job);
+    identify::Job job;
+    try {
+        job = identify::loadJob(args.job);
+    } catch (const InputError&) {
+        // Under mpirun every rank reads the same job and fails alike: rank 0 alone says why.
+        if (launcherRank() > 0) return kExitBadInput;
+        throw;
+    }
     identify::IdentifyOptions options;
 #ifdef VISCOSCOPE_WITH_MPI
     std::unique_ptr<MpiRanks> ranks;
