@@ -164,16 +164,6 @@ protected:
         std::printf("[ bad job  ] %s\n", r.err.substr(0, r.err.size() - 1).c_str());
     }
 
-#ifdef VISCOSCOPE_MPIEXEC
-    // `viscoscope` under mpirun with n ranks. Open MPI runs as root only when told twice; more
-    // ranks than this machine's two cores need --oversubscribe.
-    static std::string mpirun(int ranks) {
-        return "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 timeout 600 " +
-               std::string(VISCOSCOPE_MPIEXEC) + " --oversubscribe -n " + std::to_string(ranks) + " " +
-               VISCOSCOPE_CLI;
-    }
-#endif
-
     fs::path dir_;
 };
 
@@ -368,7 +358,10 @@ TEST_F(CliIdentify, MpiRanksShareTheEvaluationsAndGiveTheSingleProcessResult) {
     const CommandResult single = run("identify " + jobFile.string() + " --out " + (dir_ / "single").string() +
                                      " --progress json --no-plots --threads 1");
     ASSERT_EQ(single.exitCode, 0) << single.err;
-    const CommandResult ranks = runCommand(mpirun(3) + " identify " + jobFile.string() + " --out " +
+    // Open MPI runs as root only when told twice; three ranks on two cores need --oversubscribe.
+    const std::string mpirun = "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 timeout 600 " +
+                               std::string(VISCOSCOPE_MPIEXEC) + " --oversubscribe -n 3 " + VISCOSCOPE_CLI;
+    const CommandResult ranks = runCommand(mpirun + " identify " + jobFile.string() + " --out " +
                                                (dir_ / "ranks").string() + " --progress json --no-plots --threads 1",
                                            dir_);
     ASSERT_EQ(ranks.exitCode, 0) << ranks.err;
@@ -405,26 +398,5 @@ TEST_F(CliIdentify, MpiRanksShareTheEvaluationsAndGiveTheSingleProcessResult) {
     EXPECT_EQ(vdbFiles(dir_ / "ranks" / "fields"), fields);
     EXPECT_EQ(b.at("fields").at("mean_ground_speed_m_s"), a.at("fields").at("mean_ground_speed_m_s"));
     EXPECT_EQ(b.at("fields").at("source"), a.at("fields").at("source"));
-#endif
-}
-
-TEST_F(CliIdentify, MpiRanksReportABadJobOnce) {
-#ifndef VISCOSCOPE_MPIEXEC
-    GTEST_SKIP() << "built without MPI (Debian's mpi-default-dev)";
-#else
-    json doc = job();
-    doc["parameters"][0]["min"] = 100.0;
-    doc["parameters"][0]["max"] = 10.0;
-    const fs::path jobFile = writeJob(doc, "bounds.json");
-    const CommandResult r = runCommand(mpirun(3) + " identify " + jobFile.string() + " --out " +
-                                           (dir_ / "out_bad").string() + " --progress json --no-plots",
-                                       dir_);
-    EXPECT_EQ(r.exitCode, 2) << r.err;
-    const std::string line = "viscoscope: " + jobFile.string() + ": ";
-    size_t count = 0;
-    for (size_t at = r.err.find(line); at != std::string::npos; at = r.err.find(line, at + 1)) ++count;
-    EXPECT_EQ(count, 1u) << "stderr: " << r.err;
-    EXPECT_NE(r.err.find("lower 100 > upper 10"), std::string::npos) << "stderr: " << r.err;
-    EXPECT_FALSE(fs::exists(dir_ / "out_bad" / "result.json"));
 #endif
 }

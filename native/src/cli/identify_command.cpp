@@ -40,14 +40,7 @@ std::string makePlots(const fs::path& outDir) {
 
 int runIdentify(const IdentifyArguments& args) {
     openvdb::initialize();
-    identify::Job job;
-    try {
-        job = identify::loadJob(args.job);
-    } catch (const InputError&) {
-        // Under mpirun every rank reads the same job and fails alike: rank 0 alone says why.
-        if (launcherRank() > 0) return kExitBadInput;
-        throw;
-    }
+    identify::Job job = identify::loadJob(args.job);
     identify::IdentifyOptions options;
 #ifdef VISCOSCOPE_WITH_MPI
     std::unique_ptr<MpiRanks> ranks;

@@ -21,12 +21,6 @@ bool launchedByMpi() {
     return false;
 }
 
-int launcherRank() {
-    for (const char* variable : {"OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"})
-        if (const char* value = std::getenv(variable)) return std::atoi(value);
-    return 0;
-}
-
 #ifdef VISCOSCOPE_WITH_MPI
 
 namespace {

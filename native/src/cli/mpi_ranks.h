@@ -16,9 +16,6 @@ namespace viscoscope::cli {
 // Whether an MPI launcher (Open MPI's or MPICH's mpirun, or a PMIx one) started this process, read
 // from its environment without initializing MPI: a plain run never touches MPI.
 bool launchedByMpi();
-// This process's rank as the launcher numbered it (0 when not launched by one), known before MPI
-// is initialized.
-int launcherRank();
 
 #ifdef VISCOSCOPE_WITH_MPI
 class MpiRanks : public identify::EvaluationPool {
