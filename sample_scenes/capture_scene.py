@@ -45,13 +45,17 @@ def build():
     return scene
 
 
-def render_reference_clip(scene, out_dir, samples=4, resolution=48):
+def render_reference_clip(scene, out_dir, samples=4):
     """Simulate (engine), import the surface, render a small mp4 and load it as the reference."""
     import bpy
     from viscoscope.operators import reference
     vs = scene.viscoscope
     vs.work_dir = os.path.join(out_dir, "reference_sim")
-    vs.sim_resolution = resolution  # identification runs at 32: the reference must not share its grid
+    # Like `synth`: 4/3 of the Identify panel's grid and another particle seed, so that the clip is
+    # not made by the solver settings identification scores it with.
+    transfer_resolution, transfer_seed = vs.sim_resolution, vs.sim_seed
+    vs.sim_resolution = round(vs.identify_resolution * 4 / 3)
+    vs.sim_seed = vs.sim_seed + 1
     result = bpy.ops.viscoscope.simulate('EXEC_DEFAULT')
     if result != {'FINISHED'}:
         raise SystemExit("error: the reference simulation failed: %s" % vs.simulate_job.error)
@@ -73,6 +77,7 @@ def render_reference_clip(scene, out_dir, samples=4, resolution=48):
     bpy.data.objects.remove(liquid)
     bpy.data.objects.remove(volume)
     vs.work_dir = "//viscoscope"
+    vs.sim_resolution, vs.sim_seed = transfer_resolution, transfer_seed
     reference.load_reference(bpy.context, clip_path)
     return clip_path
 

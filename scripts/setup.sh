@@ -1,17 +1,23 @@
 #!/usr/bin/env bash
 # Shared by sample.sh and test.sh: installs the Debian 12 packages that are missing, then configures
-# and builds into build/. Usage: setup.sh [engine|all]  ("all" adds Blender and the test tools).
+# and builds into build/. Usage: setup.sh [engine|sample|all]  ("sample" adds Blender, which renders
+# the sample's reference clip, and matplotlib, which draws identify's plots; "all" the test tools too).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
 engine_packages=(build-essential cmake pkg-config libeigen3-dev libsuitesparse-dev libopenvdb-dev
   libboost-iostreams-dev libopencv-dev libtbb-dev nlohmann-json3-dev libcli11-dev libgtest-dev
   libbenchmark-dev libnlopt-cxx-dev ffmpeg mpi-default-dev)
-test_packages=(blender python3-pytest python3-numpy python3-matplotlib xvfb xauth libegl-mesa0
-  libgl1-mesa-dri mpi-default-bin)
+sample_packages=(blender python3-matplotlib)
+test_packages=(python3-pytest python3-numpy xvfb xauth libegl-mesa0 libgl1-mesa-dri mpi-default-bin)
 
 packages=("${engine_packages[@]}")
-[ "${1:-engine}" = all ] && packages+=("${test_packages[@]}")
+case "${1:-engine}" in
+  engine) ;;
+  sample) packages+=("${sample_packages[@]}") ;;
+  all) packages+=("${sample_packages[@]}" "${test_packages[@]}") ;;
+  *) echo "setup.sh: unknown argument '$1' (engine, sample or all)" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${packages[@]}"; do

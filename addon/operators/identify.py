@@ -60,17 +60,13 @@ def read_result(context, out_dir):
     with open(path, encoding="utf-8") as fh:
         result = json.load(fh)
     vs = context.scene.viscoscope
-    eta = result.get("viscosity", result.get("eta"))
-    if isinstance(eta, dict):
-        band = eta.get("interval") or eta.get("band") or [eta.get("low", 0.0), eta.get("high", 0.0)]
-        eta = eta.get("value")
-    else:
-        band = result.get("uncertainty") or result.get("interval") or [0.0, 0.0]
-    if eta is None:
-        raise KeyError("result.json has no viscosity")
-    vs.result_eta = float(eta)
-    vs.result_eta_low, vs.result_eta_high = float(band[0]), float(band[1])
-    vs.fluid.viscosity = float(eta)
+    viscosity = result.get("viscosity")
+    if not isinstance(viscosity, dict) or "value" not in viscosity or len(viscosity.get("interval", ())) != 2:
+        raise ValueError("%s has no viscosity with an interval" % path)
+    eta = float(viscosity["value"])
+    vs.result_eta = eta
+    vs.result_eta_low, vs.result_eta_high = (float(x) for x in viscosity["interval"])
+    vs.fluid.viscosity = eta
     for name in ("convergence.png", "landscape.png"):
         png = os.path.join(out_dir, name)
         if os.path.isfile(png):

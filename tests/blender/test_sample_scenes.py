@@ -1,5 +1,6 @@
 """The sample transfer scenes build headless, bake at low resolution and render one small frame."""
 
+import json
 import os
 import subprocess
 
@@ -91,6 +92,11 @@ def test_capture_scene_with_reference_clip(addon, tmp_path, engine_path):
         assert vs.clip is not None and os.path.samefile(bpy.path.abspath(vs.clip.filepath), str(clip))
         assert vs.clip.frame_duration == vs.sim_frames + 1
         assert "Viscoscope Liquid" not in bpy.data.objects
+        # The clip is not made on the grid and seed that Identify and Transfer use.
+        simulated = json.load(open(tmp_path / "reference_sim" / "transfer" / "scene.json"))
+        assert simulated["domain"]["resolution"] == round(vs.identify_resolution * 4 / 3) != vs.identify_resolution
+        assert simulated["seed"] == vs.sim_seed + 1
+        assert (vs.sim_resolution, vs.sim_seed) == (32, 1)
         cam = scene.camera.data
         assert any(b.source == 'MOVIE_CLIP' for b in cam.background_images)
     finally:

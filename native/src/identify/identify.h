@@ -184,7 +184,7 @@ struct Job {
     // (k = 0 … n − 1). Where a small feature sits against the faces then matters less: on the
     // sample cup at 48³ the minima of E on grids moved 0, ¼, ½ and ¾ cell were 105.5 / 104.3 / 95.9 /
     // 102.7 against the η = 100 reference, and that of their mean 102.3 (identify_landscape_bench;
-    // README, "Job files"). 1 by default when several parameters are searched.
+    // tests/bench/FINDINGS.md). 1 by default when several parameters are searched.
     int gridPlacements = 2;
     // ByGeneration (the default): each full-fidelity generation runs on one placement, in turn (the
     // coarse ones on the job's grid), at no extra cost, and θ* is the lowest point of E's mean over
