@@ -4,7 +4,8 @@
 // (exactly as identify's full-fidelity evaluations, all cores), prints E per pair, each shift's
 // minimum of identify's profile parabola (in 1/θ for viscosity, else ln θ), and the minimum of the
 // mean over the shifts; with a scalar track in E, the same again for the silhouettes alone (E
-// without the track's term), to tell which term places the minimum. A job whose
+// without the track's term), to tell which term places the minimum; with a measured track (a
+// lab's front, say), its relative error sqrt(Σ(sim − measured)² / Σ measured²). A job whose
 // grid_placement_schedule is each_evaluation scores each pair as identify does, the mean over its
 // grid_placements, each moved by the pair's shift too; by generation (the default), the pair's
 // shift alone.
@@ -60,12 +61,13 @@ int main(int argc, char** argv) {
         identify::prepareReference(job, work);
         const identify::Observation observation = identify::loadObservation(job);
         const size_t n = thetas.size(), m = shifts.size();
-        std::vector<double> E(n * m), silhouettes(n * m, 0.0);
+        std::vector<double> E(n * m), silhouettes(n * m, 0.0), trackErrors(n * m, NAN);
         tbb::parallel_for(size_t(0), n * m, [&](size_t k) {
             std::vector<double> point{thetas[k / m]};  // the other parameters at their initial values
             for (size_t p = 1; p < job.parameters.size(); ++p) point.push_back(job.parameters[p].initial);
             const identify::Evaluation ev = identify::evaluate(job, observation, point, job.resolution, {}, shifts[k % m]);
             E[k] = ev.E;
+            if (ev.trackError) trackErrors[k] = *ev.trackError;
             for (size_t f = 0; f < ev.frameE.size(); ++f) silhouettes[k] += observation.reference.weights[f] * ev.frameE[f];
         });
         const bool inverse = job.parameters.front().name == "viscosity";
@@ -77,10 +79,10 @@ int main(int argc, char** argv) {
             for (size_t i = 0; i < n; ++i) {
                 std::printf("%10.4g", thetas[i]);
                 for (size_t j = 0; j < m; ++j) {
-                    std::printf(" %9.5f", values[i * m + j]);
+                    std::printf(" %9.4g", values[i * m + j]);
                     mean[i] += values[i * m + j] / m;
                 }
-                std::printf(" %9.5f\n", mean[i]);
+                std::printf(" %9.4g\n", mean[i]);
             }
             std::printf("%10s", "minimum");
             for (size_t j = 0; j < m; ++j) {
@@ -92,6 +94,7 @@ int main(int argc, char** argv) {
         };
         printTable("E", E);
         if (observation.trackWeight > 0) printTable("silhouettes alone (E without the track's term)", silhouettes);
+        if (job.measuredTrack) printTable("the measured track's relative error", trackErrors);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "identify_landscape_bench: %s\n", e.what());
         return 2;

@@ -237,6 +237,28 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["track"] = "flat_track.csv";
         expectBadInput(writeJob(doc, "flat_track.json"), "area_px is 0 at every compared frame");
     }
+    {  // measured fronts: a column the CSV lacks, an unknown observable, a vertical direction, a
+       // track that is 0 throughout, and a track-only job whose track measures nothing
+        std::ofstream(dir_ / "front.csv") << "time_s,front_m\n0,0\n0.1,0.004\n0.3,0.01\n";
+        std::ofstream(dir_ / "front_flat.csv") << "time_s,front_m\n0,0\n0.3,0\n";
+        json doc = job();
+        doc.erase("silhouettes");
+        doc.erase("camera");
+        doc["track"] = {{"csv", "front.csv"}, {"column", "front_mm"}, {"observable", "front"},
+                        {"origin", {0.035, 0.02, 0}}, {"direction", {1, 0, 0}}};
+        expectBadInput(writeJob(doc, "track_column.json"), "front.csv: no column \"front_mm\"");
+        doc["track"]["column"] = "front_m";
+        doc["track"]["observable"] = "height";
+        expectBadInput(writeJob(doc, "track_observable.json"), "track.observable: expected \"front\" or \"radius\"");
+        doc["track"]["observable"] = "front";
+        doc["track"]["direction"] = {0, 0, -1};
+        expectBadInput(writeJob(doc, "track_direction.json"), "track.direction: must have a horizontal component");
+        doc["track"]["direction"] = {1, 0, 0};
+        doc["track"]["csv"] = "front_flat.csv";
+        expectBadInput(writeJob(doc, "track_flat.json"), "the measured track is 0");
+        doc["track"].erase("observable");
+        expectBadInput(writeJob(doc, "track_alone.json"), "camera: missing");
+    }
     {  // an unsupported format
         json doc = job();
         doc["format"] = "viscoscope.scene";

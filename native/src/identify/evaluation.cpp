@@ -55,6 +55,52 @@ bool allZero(const std::vector<double>& values) {
     return std::all_of(values.begin(), values.end(), [](double v) { return v == 0; });
 }
 
+// A frame time counts as within a measured track's span up to this much outside it (s): a CSV's
+// times carry a few significant digits (1/3 s written as 0.333333).
+constexpr double kSpanTolerance = 1e-5;
+
+// Without silhouettes the reference frames are the simulation frames (after frame 0) whose times
+// lie within the measured track's span, each weighted 1.
+ReferenceManifest framesOfMeasuredTrack(const Job& job) {
+    const MeasuredTrack& track = *job.measuredTrack;
+    ReferenceManifest frames;
+    frames.directory = track.csv.parent_path();
+    frames.source = track.csv.string();
+    frames.fps = job.scene.fps;
+    const double first = track.data.time.front() + job.timeOffset - kSpanTolerance,
+                 last = track.data.time.back() + job.timeOffset + kSpanTolerance;
+    for (int f = std::max(1, static_cast<int>(std::ceil(first * job.scene.fps))); f <= std::floor(last * job.scene.fps); ++f) {
+        frames.frames.push_back(f);
+        frames.times.push_back(f / job.scene.fps - job.timeOffset);
+        frames.weights.push_back(1);
+    }
+    return frames;
+}
+
+// The measured track at the reference frames that are compared and lie within its span.
+std::vector<double> measuredAtFrames(const MeasuredTrack& track, const Observation& obs) {
+    std::vector<double> measured(obs.simFrames.size(), std::nan(""));
+    for (size_t i = 0; i < obs.simFrames.size(); ++i) {
+        const double t = obs.reference.times[i];
+        if (obs.simFrames[i] >= 0 && t >= track.data.time.front() - kSpanTolerance &&
+            t <= track.data.time.back() + kSpanTolerance)
+            measured[i] = sampleTrack(track.data, track.column, {t}).front();
+    }
+    return measured;
+}
+
+// The simulated counterpart of a measured track's value.
+double simulatedObservable(const MeasuredTrack& track, const sim::Simulation& simulation, double groundHeight) {
+    const GroundObservables ground{groundHeight, track.band};
+    const auto& particles = simulation.particles().position;
+    return track.observable == TrackObservable::Front ? frontAlongGround(particles, track.origin, track.direction, ground)
+                                                      : puddleDiameter(particles, track.origin, ground) / 2;
+}
+
+bool hasSilhouettes(const Observation& obs) {
+    return std::any_of(obs.masks.begin(), obs.masks.end(), [](const cv::Mat1b& m) { return !m.empty(); });
+}
+
 }  // namespace
 
 nlohmann::json referenceSource(const Job& job) {
@@ -88,14 +134,15 @@ void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>*
 
 Observation loadObservation(const Job& job) {
     Observation obs;
-    obs.reference = loadReferenceManifest(job.referenceDir);
+    const bool silhouettes = job.hasSilhouettes();
+    obs.reference = silhouettes ? loadReferenceManifest(job.referenceDir) : framesOfMeasuredTrack(job);
     const ReferenceManifest& ref = obs.reference;
-    const std::string origin = (job.referenceDir / "manifest.json").string();
-    if (ref.width != job.camera.width || ref.height != job.camera.height)
+    const std::string origin = silhouettes ? (job.referenceDir / "manifest.json").string() : job.measuredTrack->csv.string();
+    if (silhouettes && (ref.width != job.camera.width || ref.height != job.camera.height))
         throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
                          std::to_string(job.camera.height) + ", reference masks are " + std::to_string(ref.width) +
                          "x" + std::to_string(ref.height));
-    obs.compared = excludeGroundBand(ref.comparedPixels(), job.camera, job.scene, job.groundBand);
+    if (silhouettes) obs.compared = excludeGroundBand(ref.comparedPixels(), job.camera, job.scene, job.groundBand);
     obs.masks.resize(ref.frames.size());
     obs.simFrames.assign(ref.frames.size(), -1);
     int used = 0;
@@ -105,12 +152,21 @@ Observation loadObservation(const Job& job) {
         const double t = ref.times[i] + job.timeOffset;
         if (!std::isfinite(t) || t < -1e-9) continue;  // before the simulation starts
         obs.simFrames[i] = static_cast<int>(std::lround(t * job.scene.fps));
-        obs.masks[i] = ref.mask(i);
+        if (silhouettes) obs.masks[i] = ref.mask(i);
         ++used;
     }
     if (used == 0)
         throw InputError(origin + ": no reference frames to compare (all weights 0, or all outside the job's "
                                   "frame range / before the simulation starts)");
+    if (job.measuredTrack) {
+        obs.measured = measuredAtFrames(*job.measuredTrack, obs);
+        std::vector<double> compared;
+        for (double m : obs.measured)
+            if (std::isfinite(m)) compared.push_back(m);
+        if (allZero(compared))
+            throw InputError(job.measuredTrack->csv.string() + ": the measured track is 0 (or outside the compared "
+                                                               "frames' times) at every compared frame; nothing to match");
+    }
     if (job.trackCsv) {
         obs.track = loadScalarTrackCsv(*job.trackCsv);
         obs.trackWeight = job.trackWeight;
@@ -119,7 +175,7 @@ Observation loadObservation(const Job& job) {
         if (!known) throw InputError(job.trackCsv->string() + ": needs an \"area_px\" column (silhouette area)");
         if (allZero(referenceTrack(obs)))
             throw InputError(job.trackCsv->string() + ": area_px is 0 at every compared frame; nothing to match");
-    } else if (job.areaTrackWeight > 0 && informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
+    } else if (silhouettes && job.areaTrackWeight > 0 && informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
         // (A reference that hardly shows liquid has no area to match: the silhouettes alone decide.)
         ScalarTrack area{{"area_px"}, {}, {{}}};
         for (size_t i = 0; i < ref.frames.size(); ++i)
@@ -138,8 +194,14 @@ int lastSimFrame(const Observation& observation) {
 }
 
 std::vector<int> informativeSimFrames(const Observation& observation) {
-    const double comparedPixels = observation.compared.empty() ? 0.0 : cv::countNonZero(observation.compared);
     std::vector<int> frames;
+    if (!hasSilhouettes(observation)) {
+        for (size_t i = 0; i < observation.measured.size(); ++i)
+            if (observation.simFrames[i] >= 0 && observation.measured[i] > 0) frames.push_back(observation.simFrames[i]);
+        std::sort(frames.begin(), frames.end());
+        return frames;
+    }
+    const double comparedPixels = observation.compared.empty() ? 0.0 : cv::countNonZero(observation.compared);
     for (size_t i = 0; i < observation.simFrames.size(); ++i) {
         if (observation.simFrames[i] < 0 || observation.masks[i].empty()) continue;
         const double pixels = comparedArea(observation.masks[i], observation.compared);
@@ -167,10 +229,13 @@ Observation firstPartOf(const Observation& observation, double share) {
         if (part.simFrames[i] > end + 1e-9) {
             part.simFrames[i] = -1;
             part.masks[i] = cv::Mat1b();
+            if (!part.measured.empty()) part.measured[i] = std::nan("");
         }
     // A measured track may stay 0 through the first part (the liquid not yet in view of the
     // measurement): it has no scale to normalize by there, and the silhouettes decide alone.
     if (part.track && allZero(referenceTrack(part))) part.track.reset();
+    if (hasSilhouettes(part) && std::none_of(part.measured.begin(), part.measured.end(), [](double m) { return m != 0 && std::isfinite(m); }))
+        part.measured.clear();
     return part;
 }
 
@@ -219,19 +284,28 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     const size_t count = obs.simFrames.size();
     ev.frameE.assign(count, 0.0);
     std::vector<double> areas(count, 0.0);
+    // The measured track's simulated values, where it is compared.
+    std::vector<double> trackSimulated, trackMeasured;
+    const double trackGround = ground ? *ground : scene.domain.min.z();
+    const bool silhouettes = hasSilhouettes(obs);
     for (int frame = 0; frame <= lastFrame; ++frame) {
         const auto simStart = Clock::now();
         if (frame > 0) simulation.advanceFrame();
         auto lap = Clock::now();
         ev.simulationSeconds += seconds(simStart, lap);
         const bool compared = std::find(obs.simFrames.begin(), obs.simFrames.end(), frame) != obs.simFrames.end();
-        if (!compared && !writeFields) {
+        for (size_t i = 0; i < obs.measured.size(); ++i)
+            if (obs.simFrames[i] == frame && std::isfinite(obs.measured[i])) {
+                trackSimulated.push_back(simulatedObservable(*job.measuredTrack, simulation, trackGround));
+                trackMeasured.push_back(obs.measured[i]);
+            }
+        if ((!compared || !silhouettes) && !writeFields) {
             ev.frameSeconds.push_back(seconds(simStart, lap));
             continue;
         }
         const auto levelSet = surface::liquidLevelSet(simulation);
         const auto built = Clock::now();
-        (compared ? ev.silhouetteSeconds : ev.fieldsSeconds) += seconds(lap, built);
+        (compared && silhouettes ? ev.silhouetteSeconds : ev.fieldsSeconds) += seconds(lap, built);
         lap = built;
         if (writeFields) {
             // Written before the clip below: Blender shows the container itself.
@@ -257,7 +331,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
             ev.fieldsSeconds += seconds(lap, written);
             lap = written;
         }
-        if (compared) {
+        if (compared && silhouettes) {
             surface::clipToSolidExterior(*levelSet, simulation.solids());
             const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
                                                               : silhouetteFromLevelSetFast(*levelSet, job.camera);
@@ -280,6 +354,10 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
             if (obs.simFrames[i] >= 0) simulated.push_back(areas[i]);
         ev.E += obs.trackWeight * normalizedSquaredError(simulated, referenceTrack(obs));
     }
+    if (!trackMeasured.empty()) {
+        ev.trackError = std::sqrt(normalizedSquaredError(trackSimulated, trackMeasured));
+        ev.E += job.measuredTrack->weight * *ev.trackError * *ev.trackError;
+    }
     ev.seconds = seconds(start, Clock::now());
     return ev;
 }
@@ -295,6 +373,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         const Evaluation other = evaluateOnGrid(job, obs, theta, resolution, {}, gridShift + double(k) / n);
         ev.E += other.E;
         ev.simulatedPixels += other.simulatedPixels;
+        if (ev.trackError) ev.trackError = std::hypot(*ev.trackError, *other.trackError);
         for (size_t i = 0; i < ev.frameE.size(); ++i) ev.frameE[i] += other.frameE[i];
         ev.seconds += other.seconds;
         ev.simulationSeconds += other.simulationSeconds;
@@ -304,6 +383,7 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
     }
     ev.E /= n;
     ev.simulatedPixels /= n;
+    if (ev.trackError) *ev.trackError /= std::sqrt(double(n));  // the RMS over the placements
     for (double& e : ev.frameE) e /= n;
     return ev;
 }

@@ -25,6 +25,7 @@ json toJson(const Evaluation& e) {
              {"silhouette_s", e.silhouetteSeconds},
              {"fields_s", e.fieldsSeconds},
              {"frame_s", e.frameSeconds}};
+    if (e.trackError) doc["track_error"] = *e.trackError;
     if (e.fields)
         doc["fields"] = {{"frames", e.fields->frames},
                          {"mean_ground_speed", e.fields->meanGroundSpeed},
@@ -44,6 +45,7 @@ Evaluation evaluationFromJson(const json& doc) {
     e.silhouetteSeconds = doc.at("silhouette_s").get<double>();
     e.fieldsSeconds = doc.at("fields_s").get<double>();
     e.frameSeconds = doc.at("frame_s").get<std::vector<double>>();
+    if (doc.contains("track_error")) e.trackError = doc.at("track_error").get<double>();
     if (doc.contains("fields")) {
         const json& f = doc.at("fields");
         e.fields = FieldsSummary{f.at("frames").get<int>(), f.at("mean_ground_speed").get<double>(),

@@ -107,6 +107,7 @@ std::string fingerprint(const Job& job) {
     doc["_camera"] = cameraToJson(job.camera);
     doc["_reference"] = job.referenceDir.string();
     doc["_reference_source"] = referenceSource(job);
+    if (job.measuredTrack) doc["_measured_track"] = {job.measuredTrack->data.time, job.measuredTrack->data.values};
     // Their defaults may change between engine versions:
     doc["_silhouette_comparison"] = silhouetteComparisonName(job.silhouetteComparison);
     doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
@@ -524,7 +525,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             if (stop == StopReason::TimeBudget) stop.reset();  // decided again below, with this job's budget
         }
         resumedFrom = es.generation();
-    } else {
+    } else if (job.hasSilhouettes()) {
         requireCameraSeesLiquid(job, coarseEnd > 0 ? coarseRes : fineRes);
     }
 
@@ -681,7 +682,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const BatchResult ran = pool.evaluate(job, observations, batch);
         const std::vector<Evaluation>& evals = ran.evaluations;
         const std::vector<std::string>& errors = ran.errors;
-        if (g == 0) {
+        if (g == 0 && job.hasSilhouettes()) {
             double pixels = 0;
             for (const Evaluation& e : evals) pixels += e.simulatedPixels;
             if (pixels == 0)

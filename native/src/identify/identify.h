@@ -130,6 +130,26 @@ enum class PlacementSchedule { EachEvaluation, ByGeneration };  // Job::placemen
 // The job's "grid_placement_schedule" names: "each_evaluation", "by_generation".
 const char* placementScheduleName(PlacementSchedule schedule);
 
+// A measured track of a world-space observable, such as a lab's front positions over time: the
+// job's "track" with an "observable". The simulation's value comes from its particles
+// (frontAlongGround, puddleDiameter) at the simulation frames within the track's time span, and E
+// gains weight · Σ(sim − measured)² / Σ measured². It may stand alone, without silhouettes or a
+// camera, or join them.
+enum class TrackObservable {
+    Front,   // how far the liquid on the ground reaches from `origin` along `direction` (m)
+    Radius,  // the radius of the liquid on the ground around the vertical through `origin` (m)
+};
+struct MeasuredTrack {
+    std::filesystem::path csv;
+    ScalarTrack data;
+    size_t column = 0;  // the measured column of `data`
+    TrackObservable observable = TrackObservable::Front;
+    Eigen::Vector3d origin = Eigen::Vector3d::Zero();
+    Eigen::Vector3d direction = Eigen::Vector3d::UnitX();
+    double band = 0.005;  // m: liquid this close to the ground (and, for a front, to its line) counts
+    double weight = 1;
+};
+
 struct Job {
     std::filesystem::path file;
     Scene scene;
@@ -138,8 +158,12 @@ struct Job {
     std::filesystem::path referenceDir;          // the `extract` manifest folder
     std::optional<std::filesystem::path> video;  // extracted into OUT/reference when no silhouettes
     ExtractionOptions extraction;                // how: the job's optional "extraction" object
-    std::optional<std::filesystem::path> trackCsv;
+    std::optional<std::filesystem::path> trackCsv;  // an "area_px" track for the silhouettes
     double trackWeight = 1;
+    std::optional<MeasuredTrack> measuredTrack;
+    // Silhouettes (extracted, or a video to extract) are compared; without them a measured track
+    // alone is, and the camera is not needed.
+    bool hasSilhouettes() const { return !referenceDir.empty() || video.has_value(); }
     // Without a track CSV, the reference silhouettes' area over time (in the compared region) is the
     // track, with this weight (0 = off). Silhouette E is rough in θ: from about a sixth of the clip
     // on, η 2 % apart can send the stream and puddle along other paths (η = 30 against a 64³
@@ -213,6 +237,9 @@ struct Observation {
     std::vector<int> simFrames;    // the simulation frame matched to each reference frame
     std::optional<ScalarTrack> track;  // with an "area_px" column: the job's CSV or the masks' area
     double trackWeight = 0;
+    // Per reference frame, the job's measured track there (NaN where it is not compared). Without
+    // silhouettes the reference frames are the simulation frames within the track's time span.
+    std::vector<double> measured;
 };
 
 // When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
@@ -228,7 +255,8 @@ nlohmann::json referenceSource(const Job& job);
 // reference times onto simulation frames.
 Observation loadObservation(const Job& job);
 // The simulation frames of the reference frames that show liquid: a silhouette covering at least
-// kInformativePixelShare of the compared pixels (extraction noise stays below it), sorted.
+// kInformativePixelShare of the compared pixels (extraction noise stays below it), or without
+// silhouettes a measured value above 0, sorted.
 constexpr double kInformativePixelShare = 1e-3;
 std::vector<int> informativeSimFrames(const Observation& observation);
 // So many informative frames the coarse clip must hold, and below which the reference cannot bound
@@ -254,6 +282,8 @@ struct Evaluation {
     double E = 0;
     std::vector<double> frameE;
     double simulatedPixels = 0;  // total silhouette area over frames (0 = the camera saw nothing)
+    // The measured track's relative error, sqrt(Σ(sim − measured)² / Σ measured²), when one is compared.
+    std::optional<double> trackError;
     double seconds = 0;
     // Where the time went; fieldsSeconds is the .vdb writes and the level sets only they need.
     double simulationSeconds = 0, silhouetteSeconds = 0, fieldsSeconds = 0;

@@ -64,6 +64,47 @@ double bound(const nlohmann::json& p, const char* a, const char* b, double fallb
     return fallback;
 }
 
+Eigen::Vector3d finiteVector(const nlohmann::json& doc, const std::string& key, const std::string& where) {
+    if (!doc.contains(key)) throw InputError(where + "." + key + ": missing");
+    const nlohmann::json& v = doc.at(key);
+    if (!v.is_array() || v.size() != 3) throw InputError(where + "." + key + ": must be [x, y, z] (m)");
+    Eigen::Vector3d x;
+    for (int i = 0; i < 3; ++i) {
+        if (!v.at(i).is_number() || !std::isfinite(v.at(i).get<double>()))
+            throw InputError(where + "." + key + ": must be three finite numbers, got " + v.dump());
+        x[i] = v.at(i).get<double>();
+    }
+    return x;
+}
+
+// {"csv", "column", "observable": "front" | "radius", "origin", "direction" (front), "band", "weight"}
+MeasuredTrack parseMeasuredTrack(const nlohmann::json& track, const std::string& where, const fs::path& baseDir) {
+    MeasuredTrack m;
+    m.csv = resolve(baseDir, track.at("csv").get<std::string>());
+    if (!fs::exists(m.csv)) throw InputError(where + ".csv: " + m.csv.string() + " not found");
+    const std::string observable = optionalString(track, "observable", where).value();
+    if (observable == "front") m.observable = TrackObservable::Front;
+    else if (observable == "radius") m.observable = TrackObservable::Radius;
+    else throw InputError(where + ".observable: expected \"front\" or \"radius\", got \"" + observable + "\"");
+    m.origin = finiteVector(track, "origin", where);
+    if (m.observable == TrackObservable::Front) {
+        m.direction = finiteVector(track, "direction", where);
+        if (std::hypot(m.direction.x(), m.direction.y()) == 0)
+            throw InputError(where + ".direction: must have a horizontal component");
+    }
+    m.band = optionalNumber(track, "band", m.band, where);
+    if (!(m.band > 0)) throw InputError(where + ".band: must be > 0 (m)");
+    m.weight = optionalNumber(track, "weight", m.weight, where);
+    if (!(m.weight > 0)) throw InputError(where + ".weight: must be > 0");
+    m.data = loadScalarTrackCsv(m.csv);
+    const auto column = optionalString(track, "column", where);
+    if (!column) throw InputError(where + ".column: missing (the CSV's measured column, e.g. \"front_m\")");
+    while (m.column < m.data.columns.size() && m.data.columns[m.column] != *column) ++m.column;
+    if (m.column == m.data.columns.size()) throw InputError(m.csv.string() + ": no column \"" + *column + "\"");
+    if (m.data.time.empty()) throw InputError(m.csv.string() + ": no samples");
+    return m;
+}
+
 ParameterSpec parseParameter(const nlohmann::json& p, const std::string& where) {
     if (!p.is_object()) throw InputError(where + ": must be an object");
     ParameterSpec spec;
@@ -110,8 +151,13 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     else if (doc.at("scene").is_object()) job.scene = parseScene(doc.at("scene"), origin + ": scene", baseDir);
     else throw InputError(origin + ": scene: must be a path or an object");
 
-    if (!doc.contains("camera")) throw InputError(origin + ": camera: missing");
-    if (doc.at("camera").is_string()) {
+    // A measured track of a world-space observable can stand alone: no silhouettes, no camera.
+    auto given = [&](const char* key) { return doc.contains(key) && !doc.at(key).is_null(); };
+    const bool measuredOnly = given("track") && doc.at("track").is_object() && doc.at("track").contains("observable") &&
+                              !given("silhouettes") && !given("reference") && !given("video");
+    if (!given("camera")) {
+        if (!measuredOnly) throw InputError(origin + ": camera: missing");
+    } else if (doc.at("camera").is_string()) {
         job.cameraFile = resolve(baseDir, doc.at("camera").get<std::string>());
         job.camera = loadCamera(job.cameraFile);
     } else if (doc.at("camera").is_object()) {
@@ -127,8 +173,9 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     if (!silhouettes) silhouettes = optionalString(doc, "reference", origin);
     if (silhouettes) job.referenceDir = resolve(baseDir, *silhouettes);
     if (const auto video = optionalString(doc, "video", origin)) job.video = resolve(baseDir, *video);
-    if (!silhouettes && !job.video) throw InputError(origin + ": silhouettes: missing (and no video to extract)");
-    if (!silhouettes && !fs::exists(*job.video))
+    if (!silhouettes && !job.video && !measuredOnly)
+        throw InputError(origin + ": silhouettes: missing (and no video to extract, nor a track with an observable)");
+    if (job.video && !silhouettes && !fs::exists(*job.video))
         throw InputError(origin + ": video: " + job.video->string() + " not found");
     if (silhouettes && !fs::exists(job.referenceDir / "manifest.json"))
         throw InputError(origin + ": silhouettes: " + (job.referenceDir / "manifest.json").string() + " not found");
@@ -140,12 +187,16 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         const nlohmann::json& track = doc.at("track");
         const std::string where = origin + ": track";
         if (track.is_string()) job.trackCsv = resolve(baseDir, track.get<std::string>());
-        else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
+        else if (track.is_object() && track.contains("csv") && track.at("csv").is_string() && track.contains("observable")) {
+            job.measuredTrack = parseMeasuredTrack(track, where, baseDir);
+        } else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
             job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
             job.trackWeight = optionalNumber(track, "weight", 1.0, where);
             if (job.trackWeight < 0) throw InputError(where + ".weight: must be ≥ 0");
-        } else throw InputError(where + ": must be a CSV path or {\"csv\": path, \"weight\": w}");
-        if (!fs::exists(*job.trackCsv)) throw InputError(where + ": " + job.trackCsv->string() + " not found");
+        } else throw InputError(where + ": must be a CSV path, {\"csv\": path, \"weight\": w} or a measured track "
+                                        "{\"csv\", \"column\", \"observable\", \"origin\", ...}");
+        if (job.trackCsv && !fs::exists(*job.trackCsv))
+            throw InputError(where + ": " + job.trackCsv->string() + " not found");
     }
 
     job.areaTrackWeight = optionalNumber(doc, "area_track_weight", job.areaTrackWeight, origin);
