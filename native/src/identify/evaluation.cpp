@@ -69,7 +69,8 @@ ReferenceManifest framesOfMeasuredTrack(const Job& job) {
     frames.fps = job.scene.fps;
     const double first = track.data.time.front() + job.timeOffset - kSpanTolerance,
                  last = track.data.time.back() + job.timeOffset + kSpanTolerance;
-    for (int f = std::max(1, static_cast<int>(std::ceil(first * job.scene.fps))); f <= std::floor(last * job.scene.fps); ++f) {
+    const int firstFrame = std::max(1, static_cast<int>(std::ceil(first * job.scene.fps)));
+    for (int f = firstFrame; f <= std::floor(last * job.scene.fps); ++f) {
         frames.frames.push_back(f);
         frames.times.push_back(f / job.scene.fps - job.timeOffset);
         frames.weights.push_back(1);
@@ -93,8 +94,9 @@ std::vector<double> measuredAtFrames(const MeasuredTrack& track, const Observati
 double simulatedObservable(const MeasuredTrack& track, const sim::Simulation& simulation, double groundHeight) {
     const GroundObservables ground{groundHeight, track.band};
     const auto& particles = simulation.particles().position;
-    return track.observable == TrackObservable::Front ? frontAlongGround(particles, track.origin, track.direction, ground)
-                                                      : puddleDiameter(particles, track.origin, ground) / 2;
+    if (track.observable == TrackObservable::Front)
+        return frontAlongGround(particles, track.origin, track.direction, ground);
+    return puddleDiameter(particles, track.origin, ground) / 2;
 }
 
 bool hasSilhouettes(const Observation& obs) {
@@ -137,7 +139,8 @@ Observation loadObservation(const Job& job) {
     const bool silhouettes = job.hasSilhouettes();
     obs.reference = silhouettes ? loadReferenceManifest(job.referenceDir) : framesOfMeasuredTrack(job);
     const ReferenceManifest& ref = obs.reference;
-    const std::string origin = silhouettes ? (job.referenceDir / "manifest.json").string() : job.measuredTrack->csv.string();
+    const std::string origin =
+        silhouettes ? (job.referenceDir / "manifest.json").string() : job.measuredTrack->csv.string();
     if (silhouettes && (ref.width != job.camera.width || ref.height != job.camera.height))
         throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
                          std::to_string(job.camera.height) + ", reference masks are " + std::to_string(ref.width) +
@@ -164,8 +167,9 @@ Observation loadObservation(const Job& job) {
         for (double m : obs.measured)
             if (std::isfinite(m)) compared.push_back(m);
         if (allZero(compared))
-            throw InputError(job.measuredTrack->csv.string() + ": the measured track is 0 (or outside the compared "
-                                                               "frames' times) at every compared frame; nothing to match");
+            throw InputError(job.measuredTrack->csv.string() +
+                             ": the measured track is 0 (or outside the compared frames' times) at every compared "
+                             "frame; nothing to match");
     }
     if (job.trackCsv) {
         obs.track = loadScalarTrackCsv(*job.trackCsv);
@@ -175,7 +179,8 @@ Observation loadObservation(const Job& job) {
         if (!known) throw InputError(job.trackCsv->string() + ": needs an \"area_px\" column (silhouette area)");
         if (allZero(referenceTrack(obs)))
             throw InputError(job.trackCsv->string() + ": area_px is 0 at every compared frame; nothing to match");
-    } else if (silhouettes && job.areaTrackWeight > 0 && informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
+    } else if (silhouettes && job.areaTrackWeight > 0 &&
+               informativeSimFrames(obs).size() >= size_t(kMinInformativeFrames)) {
         // (A reference that hardly shows liquid has no area to match: the silhouettes alone decide.)
         ScalarTrack area{{"area_px"}, {}, {{}}};
         for (size_t i = 0; i < ref.frames.size(); ++i)
@@ -197,7 +202,8 @@ std::vector<int> informativeSimFrames(const Observation& observation) {
     std::vector<int> frames;
     if (!hasSilhouettes(observation)) {
         for (size_t i = 0; i < observation.measured.size(); ++i)
-            if (observation.simFrames[i] >= 0 && observation.measured[i] > 0) frames.push_back(observation.simFrames[i]);
+            if (observation.simFrames[i] >= 0 && observation.measured[i] > 0)
+                frames.push_back(observation.simFrames[i]);
         std::sort(frames.begin(), frames.end());
         return frames;
     }
@@ -234,7 +240,9 @@ Observation firstPartOf(const Observation& observation, double share) {
     // A measured track may stay 0 through the first part (the liquid not yet in view of the
     // measurement): it has no scale to normalize by there, and the silhouettes decide alone.
     if (part.track && allZero(referenceTrack(part))) part.track.reset();
-    if (hasSilhouettes(part) && std::none_of(part.measured.begin(), part.measured.end(), [](double m) { return m != 0 && std::isfinite(m); }))
+    // So may the job's measured track; with silhouettes, they decide alone there too.
+    const auto measures = [](double m) { return std::isfinite(m) && m != 0; };
+    if (hasSilhouettes(part) && std::none_of(part.measured.begin(), part.measured.end(), measures))
         part.measured.clear();
     return part;
 }

@@ -187,12 +187,14 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         const nlohmann::json& track = doc.at("track");
         const std::string where = origin + ": track";
         if (track.is_string()) job.trackCsv = resolve(baseDir, track.get<std::string>());
-        else if (track.is_object() && track.contains("csv") && track.at("csv").is_string() && track.contains("observable")) {
-            job.measuredTrack = parseMeasuredTrack(track, where, baseDir);
-        } else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
-            job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
-            job.trackWeight = optionalNumber(track, "weight", 1.0, where);
-            if (job.trackWeight < 0) throw InputError(where + ".weight: must be ≥ 0");
+        else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
+            if (track.contains("observable")) {
+                job.measuredTrack = parseMeasuredTrack(track, where, baseDir);
+            } else {
+                job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
+                job.trackWeight = optionalNumber(track, "weight", 1.0, where);
+                if (job.trackWeight < 0) throw InputError(where + ".weight: must be ≥ 0");
+            }
         } else throw InputError(where + ": must be a CSV path, {\"csv\": path, \"weight\": w} or a measured track "
                                         "{\"csv\", \"column\", \"observable\", \"origin\", ...}");
         if (job.trackCsv && !fs::exists(*job.trackCsv))
