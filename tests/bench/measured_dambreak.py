@@ -6,8 +6,8 @@ power-law fit K = 9.712 Pa·sⁿ, n = 0.979; see that folder's README).
 
 1. The scene: the lock (0.2 m long, filled 0.0443 m deep) at the closed end of a channel 0.55 m
    long, ρ = 1540 kg/m³, Newtonian, without surface tension. The source does not give the channel's
-   width, so the channel is infinitely wide (periodic across, 2 cells): the drag of its side walls
-   is missing from the model.
+   width, so by default the channel is infinitely wide (periodic across, 2 cells) and the drag of its
+   side walls is missing from the model; --channel-width W puts walls W apart.
 2. A job whose reference is the measured front alone: `track` with the observable "front" along
    the channel from the gate (the CSV measures from there), no camera, no silhouettes.
 3. `viscoscope identify`: η*, its interval and the front's relative error sqrt(Σ(sim − measured)² /
@@ -15,7 +15,7 @@ power-law fit K = 9.712 Pa·sⁿ, n = 0.979; see that folder's README).
 4. `identify_landscape_bench` at the viscometer's readings and around η*: E and the front's error,
    on the job's grid and moved half a cell.
 
-    /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--work DIR]
+    /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
 """
 import argparse
 import json
@@ -36,6 +36,7 @@ def main():
     parser.add_argument("--landscape", default=str(ROOT / "build/bench/identify_landscape_bench"))
     parser.add_argument("--resolution", type=int, default=100, help="cells along the channel")
     parser.add_argument("--generations", type=int, default=30)
+    parser.add_argument("--channel-width", type=float, help="m between side walls (default: none, periodic)")
     parser.add_argument("--work", help="folder for the scene, job and results (default: a temporary one)")
     args = parser.parse_args()
     data = pathlib.Path(args.data).resolve()
@@ -43,17 +44,18 @@ def main():
         sys.exit(f"measured data not found: {data}")
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_"))
     work.mkdir(parents=True, exist_ok=True)
-    lock, depth, length, width = 0.2, 0.0443, 0.55, 2 * 0.55 / args.resolution
+    lock, depth, length = 0.2, 0.0443, 0.55
+    width = args.channel_width or 2 * length / args.resolution
     scene = {"format": "viscoscope.scene", "version": 1,
              "domain": {"min": [0, 0, 0], "max": [length, width, 0.055], "resolution": args.resolution,
-                        "periodic": [False, True, False]},
+                        "periodic": [False, args.channel_width is None, False]},
              "liquids": [{"type": "box", "min": [0, 0, 0], "max": [lock, width, depth]}],
              "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
              "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
     (work / "scene.json").write_text(json.dumps(scene, indent=1))
     job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
            "track": {"csv": str(data), "column": "front_m", "observable": "front",
-                     "origin": [lock, width / 2, 0], "direction": [1, 0, 0], "band": width / 2 + 1e-3},
+                     "origin": [lock, width / 2, 0], "direction": [1, 0, 0], "band": 0.0065},
            "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.01, "max": 1000}],
            "max_generations": args.generations, "seed": 3}
     (work / "job.json").write_text(json.dumps(job, indent=1))
@@ -68,7 +70,8 @@ def main():
     eta = result["viscosity"]["value"]
     low, high = result["viscosity"]["interval"]
     best = [e for e in result["evaluated"] if e["fidelity"] == "full" and e["theta"][0] == eta][0]
-    print(f"dam break, {args.resolution} cells along the channel, the front measured over "
+    walls = f"side walls {args.channel_width} m apart" if args.channel_width else "no side walls (periodic)"
+    print(f"dam break, {args.resolution} cells along the channel, {walls}, the front compared over "
           f"{result['frames']} frames at 4 fps")
     print(f"identified η* = {eta:.4g} Pa·s, interval [{low:.4g}, {high:.4g}], "
           f"front error {100 * best['track_error']:.2f} %, {result['evaluations']} evaluations, {wall:.0f} s")

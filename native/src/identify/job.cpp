@@ -82,7 +82,7 @@ MeasuredTrack parseMeasuredTrack(const nlohmann::json& track, const std::string&
     MeasuredTrack m;
     m.csv = resolve(baseDir, track.at("csv").get<std::string>());
     if (!fs::exists(m.csv)) throw InputError(where + ".csv: " + m.csv.string() + " not found");
-    const std::string observable = optionalString(track, "observable", where).value();
+    const std::string observable = optionalString(track, "observable", where).value_or("");
     if (observable == "front") m.observable = TrackObservable::Front;
     else if (observable == "radius") m.observable = TrackObservable::Radius;
     else throw InputError(where + ".observable: expected \"front\" or \"radius\", got \"" + observable + "\"");
