@@ -409,41 +409,48 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
 }
 
 // A measured track alone, like a lab's front positions, with no camera and no silhouettes: the
-// column's front along the ground, sampled 60 times a second from the reference simulation (24
-// cells, seed 11) and written as a CSV, identifies η on the job's 20-cell grid with seed 3.
-TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredFrontAlone) {
+// column's front along the ground, and its reach from the vertical through the middle of the wall it
+// leans on (the "radius" observable), sampled 60 times a second from the reference simulation (24
+// cells, seed 11) and written as a CSV, each identify η on the job's 20-cell grid with seed 3.
+TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
     json referenceScene = sceneJson(kEtaTrue, 24, 11, 20);
     referenceScene["fps"] = 60;
     sim::Simulation reference(parseScene(referenceScene, "reference scene"));
-    const Eigen::Vector3d origin(0.035, 0.02, 0), along = Eigen::Vector3d::UnitX();
+    const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0), along = Eigen::Vector3d::UnitX();
     const GroundObservables ground{0.0, 0.005};
-    std::ofstream csv(dir_ / "front.csv");
-    csv << "time_s,front_m\n0,0\n";
-    for (int frame = 1; frame <= 20; ++frame) {
-        reference.advanceFrame();
-        csv << frame / 60.0 << "," << frontAlongGround(reference.particles().position, origin, along, ground) << "\n";
+    std::ofstream csv(dir_ / "measured.csv");
+    csv << "time_s,front_m,radius_m\n";
+    for (int frame = 0; frame <= 20; ++frame) {
+        if (frame > 0) reference.advanceFrame();
+        const auto& particles = reference.particles().position;
+        csv << frame / 60.0 << "," << frontAlongGround(particles, gate, along, ground) << ","
+            << puddleDiameter(particles, wall, ground) / 2 << "\n";
     }
     csv.close();
-    json doc = jobJson();
-    doc.erase("camera");
-    doc.erase("silhouettes");
-    doc["track"] = {{"csv", "front.csv"}, {"column", "front_m"}, {"observable", "front"},
-                    {"origin", {origin.x(), origin.y(), origin.z()}}, {"direction", {1, 0, 0}}, {"band", 0.005}};
-    identify::IdentifyOptions options;
-    options.writeFields = false;
-    const identify::IdentificationResult result = identify::identify(job(doc), dir_ / "front_out", options);
-    const double error = std::abs(result.theta[0] - kEtaTrue) / kEtaTrue;
-    double trackError = NAN;
-    for (const json& e : result.document.at("evaluated"))
-        if (e.at("fidelity") == "full" && e.at("theta")[0] == result.theta[0]) trackError = e.at("track_error").get<double>();
-    std::printf("[ identify ] from the front alone: eta = %.4f Pa·s (truth %.1f, error %.1f %%), interval [%.3f, %.3f], "
-                "front error %.2f %%, %ld evaluations\n", result.theta[0], kEtaTrue, 100 * error,
-                result.interval[0][0], result.interval[0][1], 100 * trackError, result.evaluations);
-    EXPECT_LT(error, 0.10);
-    // 10 frames of the job's 30 fps fall within the track's third of a second.
-    EXPECT_EQ(result.document.at("frames").get<int>(), 10);
-    EXPECT_LT(trackError, 0.05);
-    fs::remove_all(dir_ / "front_out");
+    for (const char* observable : {"front", "radius"}) {
+        const Eigen::Vector3d& origin = std::string(observable) == "front" ? gate : wall;
+        json doc = jobJson();
+        doc.erase("camera");
+        doc.erase("silhouettes");
+        doc["track"] = {{"csv", "measured.csv"}, {"column", std::string(observable) + "_m"}, {"observable", observable},
+                        {"origin", {origin.x(), origin.y(), origin.z()}}, {"direction", {1, 0, 0}}, {"band", 0.005}};
+        identify::IdentifyOptions options;
+        options.writeFields = false;
+        const identify::IdentificationResult result = identify::identify(job(doc), dir_ / "track_out", options);
+        const double error = std::abs(result.theta[0] - kEtaTrue) / kEtaTrue;
+        double trackError = NAN;
+        for (const json& e : result.document.at("evaluated"))
+            if (e.at("fidelity") == "full" && e.at("theta")[0] == result.theta[0])
+                trackError = e.at("track_error").get<double>();
+        std::printf("[ identify ] from the %s alone: eta = %.4f Pa·s (truth %.1f, error %.1f %%), interval "
+                    "[%.3f, %.3f], track error %.2f %%, %ld evaluations\n", observable, result.theta[0], kEtaTrue,
+                    100 * error, result.interval[0][0], result.interval[0][1], 100 * trackError, result.evaluations);
+        EXPECT_LT(error, 0.10) << observable;
+        // 10 frames of the job's 30 fps fall within the track's third of a second.
+        EXPECT_EQ(result.document.at("frames").get<int>(), 10) << observable;
+        EXPECT_LT(trackError, 0.05) << observable;
+        fs::remove_all(dir_ / "track_out");
+    }
 }
 
 // The budget's prediction of a full-fidelity evaluation comes from the coarse evaluations near the
