@@ -6,8 +6,9 @@
 #   2. `identify`: extract that clip's silhouettes like footage and search η by CMA-ES over 48³
 #      simulations within the add-on's default 10-minute budget, into out/capture_cup/identify/;
 #   3. print η* with its interval against the truth.
-# About 13 minutes on 2 cores after the build (3 for the clip, 10 for the search). Ctrl-C stops it with its work kept; running it again
-# resumes both steps where they stopped. Extra arguments go to `identify` (e.g. --threads 1).
+# About 13 minutes on 2 cores after the build (3 for the clip, 10 for the search). Ctrl-C stops it
+# with its work kept; running it again resumes both steps where they stopped. Extra arguments go to
+# `identify` (e.g. --threads 1).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh sample
