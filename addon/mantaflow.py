@@ -4,7 +4,11 @@ Both of Mantaflow's viscosity paths are set (DESIGN.md, "What Mantaflow does"):
 - diffusion: use_diffusion, viscosity_base · 10^-viscosity_exponent = ν (Blender's preset convention);
 - variational: use_viscosity, viscosity_value = ν · 0.4 s / L², L the domain's longest side in metres.
 The variational value depends on the domain size, so it is recomputed when the domain is resized.
+Every assignment to a domain setting frees the domain's Mantaflow cache, baked frames included, even
+when the value does not change; settings are therefore only assigned when what is stored would change.
 """
+
+import array
 
 import bpy
 from bpy.app.handlers import persistent
@@ -12,6 +16,7 @@ from bpy.app.handlers import persistent
 from . import units
 
 NU_KEY = "viscoscope_nu"  # kinematic viscosity last applied to a domain, m²/s
+VISCOSITY_VALUE_MAX = 10.0  # RNA hard max of viscosity_value
 
 
 class DomainError(ValueError):
@@ -50,11 +55,30 @@ def longest_side_m(obj, scale_length):
     return max(sides) * scale_length
 
 
-def apply_variational(obj, ds, nu, scale_length):
+def set_domain_setting(ds, name, value):
+    """Assign ds.<name> only if what Blender stores would change; returns whether it did.
+
+    RNA float properties are single precision, so a double is compared after rounding it to a float:
+    compared as doubles they would always differ, and each assignment frees the cache.
+    """
+    current = getattr(ds, name)
+    stored = array.array('f', [value])[0] if isinstance(current, float) else value
+    if current == stored:
+        return False
+    setattr(ds, name, value)
+    return True
+
+
+def variational_value(obj, nu, scale_length):
+    """(viscosity_value for ν in this domain, the same clamped to what Mantaflow accepts)."""
     value = units.variational_viscosity_value(nu, longest_side_m(obj, scale_length))
-    clamped = min(value, 10.0)  # RNA hard max
-    ds.use_viscosity = True
-    ds.viscosity_value = clamped
+    return value, min(value, VISCOSITY_VALUE_MAX)
+
+
+def apply_variational(obj, ds, nu, scale_length):
+    value, clamped = variational_value(obj, nu, scale_length)
+    set_domain_setting(ds, "use_viscosity", True)
+    set_domain_setting(ds, "viscosity_value", clamped)
     return value, clamped
 
 
@@ -66,10 +90,12 @@ def apply_fluid(obj, fluid, scale_length, material=None):
     ds = domain_settings(obj)
     nu = units.kinematic_viscosity(fluid.viscosity, fluid.density)
     base, exponent = units.diffusion_base_exponent(nu)
-    ds.use_diffusion = True
-    ds.viscosity_base = base
-    ds.viscosity_exponent = exponent
-    ds.surface_tension = units.check_finite("surface tension", fluid.surface_tension, minimum=0.0)
+    # Re-applying the same fluid keeps a bake; a different one frees it, as editing the domain does.
+    set_domain_setting(ds, "use_diffusion", True)
+    set_domain_setting(ds, "viscosity_base", base)
+    set_domain_setting(ds, "viscosity_exponent", exponent)
+    set_domain_setting(ds, "surface_tension",
+                       units.check_finite("surface tension", fluid.surface_tension, minimum=0.0))
     value, clamped = apply_variational(obj, ds, nu, scale_length)
     obj[NU_KEY] = nu
     if material is not None:
@@ -103,7 +129,10 @@ def fluid_material(fluid, name):
 
 @persistent
 def _recompute_on_resize(scene, depsgraph):
-    """Keep viscosity_value consistent with ν when a domain is resized."""
+    """Keep viscosity_value consistent with ν when a domain is resized.
+
+    Runs after every depsgraph update, the one that follows a bake included, so it must not assign an
+    unchanged value: that would free the bake just made."""
     scale_length = scene.unit_settings.scale_length
     for update in depsgraph.updates:
         if not (update.is_updated_transform or update.is_updated_geometry):
@@ -114,13 +143,11 @@ def _recompute_on_resize(scene, depsgraph):
         mod = fluid_modifier(obj)
         if mod is None or mod.fluid_type != 'DOMAIN':
             continue
-        ds = mod.domain_settings
         try:
-            value = min(units.variational_viscosity_value(obj[NU_KEY], longest_side_m(obj, scale_length)), 10.0)
+            _, clamped = variational_value(obj, obj[NU_KEY], scale_length)
         except (units.UnitError, DomainError):
             continue
-        if abs(ds.viscosity_value - value) > 1e-9 * max(1.0, value):
-            ds.viscosity_value = value
+        set_domain_setting(mod.domain_settings, "viscosity_value", clamped)
 
 
 def register():

@@ -130,8 +130,8 @@ def torus(scene, name, major, minor, location, material=None, segments=48, sides
     return obj
 
 
-def make_domain(scene, lo, hi, res, frames, name="Fluid Domain"):
-    """A Mantaflow liquid domain spanning [lo, hi] with a cache in a temp folder."""
+def make_domain(scene, lo, hi, res, frames, name="Fluid Domain", cache_dir=None):
+    """A Mantaflow liquid domain spanning [lo, hi] with its cache in cache_dir (default: a temp folder)."""
     bpy.ops.mesh.primitive_cube_add(size=1.0)
     dom = bpy.context.active_object
     dom.name = name
@@ -147,7 +147,7 @@ def make_domain(scene, lo, hi, res, frames, name="Fluid Domain"):
     ds.cache_type = 'ALL'
     ds.cache_frame_start = 1
     ds.cache_frame_end = frames
-    ds.cache_directory = tempfile.mkdtemp(prefix="viscoscope_mantaflow_")
+    ds.cache_directory = cache_dir or tempfile.mkdtemp(prefix="viscoscope_mantaflow_")
     scene.frame_start, scene.frame_end = 1, frames
     return dom
 

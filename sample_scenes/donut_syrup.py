@@ -2,7 +2,8 @@
 
     blender -b --factory-startup --python sample_scenes/donut_syrup.py -- --out DIR \
         [--fluid chocolate|caramel|honey] [--res 32] [--frames 20] [--samples 8] [--no-bake] [--no-render]
-writes DIR/donut_<fluid>.blend and DIR/donut_<fluid>.png (one small Cycles frame).
+writes DIR/donut_<fluid>.blend, its Mantaflow cache DIR/donut_<fluid>_cache and DIR/donut_<fluid>.png
+(one small Cycles frame).
 """
 
 import os
@@ -19,7 +20,7 @@ FLUIDS = {
 }
 
 
-def build(fluid_key="chocolate", res=32, frames=20):
+def build(fluid_key="chocolate", res=32, frames=20, cache_dir=None):
     import bpy
     scene = _common.empty_scene()
     _common.set_fluid(scene, *FLUIDS[fluid_key])
@@ -35,7 +36,8 @@ def build(fluid_key="chocolate", res=32, frames=20):
     _common.make_flow(source, velocity=(0.0, 0.0, -0.3))
     for obj in (donut, plate):
         _common.make_effector(obj)
-    dom = _common.make_domain(scene, (-0.075, -0.075, -0.005), (0.075, 0.075, 0.105), res, frames)
+    dom = _common.make_domain(scene, (-0.075, -0.075, -0.005), (0.075, 0.075, 0.105), res, frames,
+                              cache_dir=cache_dir)
     _common.apply_preset_to_domain(dom)
     _common.add_camera(scene, (0.0, -0.2, 0.14), (0.0, 0.0, 0.02), lens=45)
     _common.add_lights(scene, (0, 0, 0.02), scale=0.3)
@@ -53,7 +55,7 @@ if __name__ == "__main__":
     if fluid not in FLUIDS:
         raise SystemExit("error: --fluid must be one of %s" % ", ".join(FLUIDS))
     args = _common.parse_args()
-    scene, dom = build(fluid, args.res, args.frames)
+    scene, dom = build(fluid, args.res, args.frames, os.path.join(args.out, "donut_%s_cache" % fluid))
     if not args.no_bake:
         _common.bake(dom)
     if not args.no_render:

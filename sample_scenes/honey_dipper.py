@@ -2,7 +2,8 @@
 
     blender -b --factory-startup --python sample_scenes/honey_dipper.py -- --out DIR \
         [--res 32] [--frames 20] [--samples 8] [--no-bake] [--no-render]
-writes DIR/honey_dipper.blend and DIR/honey_dipper.png (one small Cycles frame).
+writes DIR/honey_dipper.blend, its Mantaflow cache DIR/honey_dipper_cache and DIR/honey_dipper.png
+(one small Cycles frame).
 """
 
 import math
@@ -42,7 +43,7 @@ def dipper(scene, material):
     return obj
 
 
-def build(res=32, frames=20):
+def build(res=32, frames=20, cache_dir=None):
     import bpy
     scene = _common.empty_scene()
     _common.set_fluid(scene, *HONEY)
@@ -61,7 +62,7 @@ def build(res=32, frames=20):
     _common.make_flow(source, velocity=(0.0, 0.0, -0.2))
     for obj in (stick, bowl, bowl_floor):
         _common.make_effector(obj)
-    dom = _common.make_domain(scene, (-0.03, -0.05, -0.004), (0.09, 0.05, 0.1), res, frames)
+    dom = _common.make_domain(scene, (-0.03, -0.05, -0.004), (0.09, 0.05, 0.1), res, frames, cache_dir=cache_dir)
     _common.apply_preset_to_domain(dom)
     _common.add_camera(scene, (0.1, -0.17, 0.12), (0.03, 0.0, 0.04), lens=45)
     _common.add_lights(scene, (0.03, 0, 0.04), scale=0.3)
@@ -70,7 +71,7 @@ def build(res=32, frames=20):
 
 if __name__ == "__main__":
     args = _common.parse_args(default_res=32, default_frames=20)
-    scene, dom = build(args.res, args.frames)
+    scene, dom = build(args.res, args.frames, os.path.join(args.out, "honey_dipper_cache"))
     if not args.no_bake:
         _common.bake(dom)
     if not args.no_render:

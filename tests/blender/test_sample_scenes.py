@@ -1,7 +1,9 @@
 """The sample transfer scenes build headless, bake at low resolution and render one small frame."""
 
+import collections
 import json
 import os
+import re
 import subprocess
 
 import bpy
@@ -11,7 +13,11 @@ import conftest
 
 pytestmark = pytest.mark.slow
 
-FAST = ["--res", "20", "--frames", "8", "--samples", "2"]
+FRAMES = 8
+FAST = ["--res", "20", "--frames", str(FRAMES), "--samples", "2"]
+# Caramel's ν makes Mantaflow's diffusion path (use_diffusion, set by Apply) blow up on these grids: the
+# liquid is thrown across the domain. Its placement check is expected to fail until that is fixed.
+SCATTERED_BY_DIFFUSION = {"caramel"}
 
 
 def _run(script, out, *extra):
@@ -30,6 +36,83 @@ def _not_blank(path):
         return max(lum) - min(lum) > 0.2
     finally:
         bpy.data.images.remove(img)
+
+
+def _check_background_shows(path):
+    """The scenes have no ground: around the objects the frame shows the world's flat grey. A domain
+    evaluated as its box (no bake) covers the whole frame in noisy liquid material instead."""
+    img = bpy.data.images.load(path)
+    try:
+        px = img.pixels[:]
+    finally:
+        bpy.data.images.remove(img)
+    colours = collections.Counter(tuple(round(c * 50) for c in px[i:i + 3]) for i in range(0, len(px), 4))
+    colour, count = colours.most_common(1)[0]
+    share = count / (len(px) // 4)
+    assert max(colour) - min(colour) <= 2 and share > 1 / 3, "most common colour %s/50 in %.0f%% of the frame" % (
+        colour, 100 * share)
+
+
+def _check_cache(cache_dir):
+    """Mantaflow wrote data and mesh files for every baked frame (named <name>_<frame>.<ext>)."""
+    for kind in ("data", "mesh"):
+        folder = os.path.join(cache_dir, kind)
+        names = os.listdir(folder) if os.path.isdir(folder) else []
+        per_frame = collections.Counter(int(m.group(1)) for m in map(re.compile(r"_(\d+)\.").search, names) if m)
+        assert all(per_frame[frame] > 0 for frame in range(1, FRAMES + 1)), "%s: files per frame %s" % (
+            kind, dict(per_frame))
+
+
+# Opens the saved .blend with the add-on enabled, as a user would, and reports world-space bounding
+# boxes at the last frame: the evaluated domain (the liquid surface read from the cache) and objects.
+_LIQUID_PROBE = """
+import json, sys, bpy, mathutils
+sys.path.insert(0, %r)
+import _common
+_common.enable_addon()
+def box(points):
+    points = list(points)
+    if not points:
+        return None
+    return [[min(p[i] for p in points) for i in range(3)], [max(p[i] for p in points) for i in range(3)]]
+scene = bpy.context.scene
+scene.frame_set(scene.frame_end)
+dom = bpy.data.objects["Fluid Domain"]
+evaluated = dom.evaluated_get(bpy.context.evaluated_depsgraph_get())
+mesh = evaluated.to_mesh()
+report = {"liquid": box(evaluated.matrix_world @ v.co for v in mesh.vertices),
+          "domain": box(dom.matrix_world @ v.co for v in dom.data.vertices),
+          "objects": {o.name: box(o.matrix_world @ mathutils.Vector(c) for c in o.bound_box)
+                      for o in scene.objects if o.type == 'MESH' and o is not dom}}
+evaluated.to_mesh_clear()
+print("LIQUID " + json.dumps(report))
+"""
+
+
+def _liquid_at_last_frame(blend):
+    proc = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", blend, "--python-exit-code", "1",
+                           "--python-expr", _LIQUID_PROBE % os.path.join(conftest.REPO, "sample_scenes")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    line = next(l for l in proc.stdout.splitlines() if l.startswith("LIQUID "))
+    return json.loads(line[len("LIQUID "):])
+
+
+def _check_liquid(report, inflow, onto):
+    """At the last frame the liquid is a stream from the inflow down onto `onto`, not the domain box."""
+    assert report["liquid"] is not None, "the domain evaluates to no liquid at all"
+    lo, hi = report["liquid"]
+    dom_lo, dom_hi = report["domain"]
+    for axis in (0, 1):
+        assert hi[axis] - lo[axis] < 0.5 * (dom_hi[axis] - dom_lo[axis]), (
+            "liquid %s spans most of the domain %s" % (report["liquid"], report["domain"]))
+    in_lo, in_hi = report["objects"][inflow]
+    for axis in (0, 1):
+        assert lo[axis] < (in_lo[axis] + in_hi[axis]) / 2 < hi[axis], "liquid %s is not under %s %s" % (
+            report["liquid"], inflow, report["objects"][inflow])
+    on_lo, on_hi = report["objects"][onto]
+    assert all(lo[i] < on_hi[i] and hi[i] > on_lo[i] for i in range(3)), "liquid %s has not reached %s %s" % (
+        report["liquid"], onto, report["objects"][onto])
 
 
 def _check_domain(blend, eta, rho):
@@ -54,14 +137,26 @@ def _check_domain(blend, eta, rho):
                                               ("honey", 8.0, 1420.0)])
 def test_donut_scene(tmp_path, fluid, eta, rho):
     _run("donut_syrup.py", tmp_path, "--fluid", fluid, *FAST)
-    assert _not_blank(str(tmp_path / ("donut_%s.png" % fluid)))
-    _check_domain(str(tmp_path / ("donut_%s.blend" % fluid)), eta, rho)
+    name = "donut_%s" % fluid
+    _check_cache(str(tmp_path / (name + "_cache")))
+    assert _not_blank(str(tmp_path / (name + ".png")))
+    _check_background_shows(str(tmp_path / (name + ".png")))
+    _check_domain(str(tmp_path / (name + ".blend")), eta, rho)
+    report = _liquid_at_last_frame(str(tmp_path / (name + ".blend")))
+    if fluid in SCATTERED_BY_DIFFUSION:
+        with pytest.raises(AssertionError):  # passes once fixed: then drop it from SCATTERED_BY_DIFFUSION
+            _check_liquid(report, "Syrup Inflow", "Donut")
+        pytest.xfail("Mantaflow's diffusion path scatters %s: liquid %s" % (fluid, report["liquid"]))
+    _check_liquid(report, "Syrup Inflow", "Donut")
 
 
 def test_honey_dipper_scene(tmp_path):
     _run("honey_dipper.py", tmp_path, *FAST)
+    _check_cache(str(tmp_path / "honey_dipper_cache"))
     assert _not_blank(str(tmp_path / "honey_dipper.png"))
+    _check_background_shows(str(tmp_path / "honey_dipper.png"))
     _check_domain(str(tmp_path / "honey_dipper.blend"), 7.86, 1420.0)
+    _check_liquid(_liquid_at_last_frame(str(tmp_path / "honey_dipper.blend")), "Honey Inflow", "Honey Dipper")
 
 
 def test_capture_scene(addon, tmp_path):
