@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Build the installable add-on zip: viscoscope/ (addon/ + blender_manifest.toml + bin/viscoscope).
+"""Build the installable add-on zip: viscoscope/ (addon/ + blender_manifest.toml + bin/viscoscope +
+scripts/, the engine's helper scripts).
 
     python3 scripts/build_addon_zip.py [--engine build/bin/viscoscope | --no-engine] [--out DIR_OR_ZIP]
 
@@ -19,6 +20,9 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 ADDON = os.path.join(REPO, "addon")
 MANIFEST = os.path.join(REPO, "blender_manifest.toml")
 PACKAGE = "viscoscope"
+# Helper scripts the engine runs (plots, synthetic references). It looks for them in scripts/ of the
+# nearest folder above its executable (native/src/cli/scripts.cpp): viscoscope/scripts/ for bin/viscoscope.
+ENGINE_SCRIPTS = ("plot_identification.py", "render_reference.py")
 
 
 def bl_info_version(init_path=os.path.join(ADDON, "__init__.py")):
@@ -64,6 +68,8 @@ def build(out, engine=None):
             info.compress_type = zipfile.ZIP_DEFLATED
             with open(engine, "rb") as fh:
                 zf.writestr(info, fh.read())
+            for name in ENGINE_SCRIPTS:
+                zf.write(os.path.join(REPO, "scripts", name), os.path.join(PACKAGE, "scripts", name))
     os.replace(tmp, out)
     return out
 

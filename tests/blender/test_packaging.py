@@ -74,6 +74,8 @@ def test_zip_installs_into_a_clean_user_config(tmp_path, bundled_engine):
         names = zf.namelist()
         assert "viscoscope/__init__.py" in names and "viscoscope/blender_manifest.toml" in names
         assert "viscoscope/bin/viscoscope" in names
+        for script in build_addon_zip.ENGINE_SCRIPTS:
+            assert "viscoscope/scripts/" + script in names
         assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
         assert all(n.startswith("viscoscope/") for n in names)
     script = tmp_path / "install.py"
@@ -96,3 +98,32 @@ def test_build_refuses_mismatched_versions(tmp_path, monkeypatch):
     monkeypatch.setattr(build_addon_zip, "manifest_version", lambda path=str(bad): "9.9.9")
     with pytest.raises(SystemExit, match="!= blender_manifest.toml version 9.9.9"):
         build_addon_zip.build(str(tmp_path / "out"), None)
+
+
+def _engine_script_lookup(engine, name):
+    """Where the engine looks for a helper script (native/src/cli/scripts.cpp, findScript): scripts/NAME
+    in the executable's folder or up to five folders above it ($VISCOSCOPE_SCRIPTS unset)."""
+    here = os.path.dirname(os.path.realpath(engine))
+    for _ in range(6):
+        candidate = os.path.join(here, "scripts", name)
+        if os.path.exists(candidate):
+            return candidate
+        if os.path.dirname(here) == here:
+            break
+        here = os.path.dirname(here)
+    return None
+
+
+def test_packaged_engine_finds_its_scripts(tmp_path, bundled_engine):
+    """Installed from the zip, the engine finds plot_identification.py and render_reference.py beside
+    it, not "skipped: scripts/plot_identification.py not found"."""
+    zip_path = build_addon_zip.build(str(tmp_path / "dist"), bundled_engine)
+    installed = tmp_path / "addons"
+    with zipfile.ZipFile(zip_path) as zf:
+        zf.extractall(installed)
+    engine = installed / "viscoscope" / "bin" / "viscoscope"
+    for name in build_addon_zip.ENGINE_SCRIPTS:
+        found = _engine_script_lookup(str(engine), name)
+        assert found == str(installed / "viscoscope" / "scripts" / name), found
+        with open(found, "rb") as packaged, open(os.path.join(conftest.REPO, "scripts", name), "rb") as source:
+            assert packaged.read() == source.read()
