@@ -15,6 +15,20 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _common  # noqa: E402
 
 
+CLIP_SIZE = (320, 180)  # the reference clip's pixels (small: Cycles renders it on a CPU)
+
+
+def mark_points(scene):
+    """The points' pixels as the artist would mark them on footage shot with this camera, in the
+    camera's image: the render size, which Load Video sets to the clip's."""
+    import bpy
+    from viscoscope import camera_math, scene_export
+    bpy.context.view_layer.update()
+    cv = camera_math.opencv_camera(scene_export.camera_dict(scene.camera, scene))
+    for p in scene.viscoscope.points:
+        p.image = camera_math.project(cv, list(p.world))
+
+
 def build():
     import bpy
     scene = _common.empty_scene()
@@ -28,7 +42,8 @@ def build():
     scene.viscoscope.sim_frames = 24
     _common.add_camera(scene, (0.0, -0.45, 0.12), (0.0, 0.0, 0.07), lens=50)
     _common.add_lights(scene, (0, 0, 0.06), scale=0.5)
-    scene.render.resolution_x, scene.render.resolution_y = 1280, 720
+    # The render size is the reference clip's, so that the camera's image is the footage's.
+    scene.render.resolution_x, scene.render.resolution_y = CLIP_SIZE
     scene.render.fps = 30
     scene.frame_start, scene.frame_end = 1, 24
     # Four reference points for "Match camera from points": the cup's rim and the base.
@@ -36,12 +51,7 @@ def build():
                          ("base left", (-0.046, 0.0, 0.05)), ("base right", (0.046, 0.0, 0.05))):
         p = scene.viscoscope.points.add()
         p.label, p.world = label, world
-    # Their pixels, as the artist would mark them on footage shot with this camera.
-    from viscoscope import camera_math, scene_export
-    bpy.context.view_layer.update()
-    cv = camera_math.opencv_camera(scene_export.camera_dict(scene.camera, scene))
-    for p in scene.viscoscope.points:
-        p.image = camera_math.project(cv, list(p.world))
+    mark_points(scene)
     return scene
 
 
@@ -63,7 +73,7 @@ def render_reference_clip(scene, out_dir, samples=4):
     scene.render.engine = 'CYCLES'
     scene.cycles.samples = samples
     scene.cycles.use_denoising = False
-    scene.render.resolution_x, scene.render.resolution_y = 320, 180
+    scene.render.resolution_x, scene.render.resolution_y = CLIP_SIZE
     scene.render.image_settings.file_format = 'FFMPEG'
     scene.render.ffmpeg.format = 'MPEG4'
     scene.render.ffmpeg.codec = 'H264'
@@ -79,6 +89,7 @@ def render_reference_clip(scene, out_dir, samples=4):
     vs.work_dir = "//viscoscope"
     vs.sim_resolution, vs.sim_seed = transfer_resolution, transfer_seed
     reference.load_reference(bpy.context, clip_path)
+    mark_points(scene)  # on the clip as decoded
     return clip_path
 
 

@@ -38,6 +38,30 @@ def reprojection_rms(cam_json, world_m, image):
     return math.sqrt(sum(errors) / len(errors)) if errors else float("nan")
 
 
+def check_points_in_image(points, size):
+    """Refuse a point whose pixel lies outside the image (pixel centres span [-0.5, size - 0.5]):
+    pixels marked on footage of another size would pose the camera far off."""
+    w, h = size
+    for p in points:
+        u, v = p.image
+        if not (-0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5):
+            raise scene_export.ExportError("point '%s' at pixel (%.0f, %.0f) is outside the %d × %d image"
+                                           % (p.label, u, v, w, h))
+
+
+def check_pose_plausible(solved, world_m, cam_data, scale_length):
+    """Refuse a pose that puts a point behind the camera or beyond its clipping range: Blender
+    would not draw such a point, so the footage cannot show it there."""
+    near, far = cam_data.clip_start * scale_length, cam_data.clip_end * scale_length
+    R, t = solved["R"], solved["t"]
+    for X in world_m:
+        depth = sum(R[2][c] * X[c] for c in range(3)) + t[2]
+        if not near <= depth <= far:
+            raise scene_export.ExportError(
+                "the points put the camera %.3g m from them, outside its clip range %.3g–%.3g m: check the "
+                "points' pixels and positions" % (depth, near, far))
+
+
 class VISCOSCOPE_OT_export_camera(bpy.types.Operator):
     """Write the camera as viscoscope.blender_camera JSON and convert it with the engine"""
     bl_idname = "viscoscope.export_camera"
@@ -101,6 +125,8 @@ class VISCOSCOPE_OT_match_camera(bpy.types.Operator):
             if len(vs.points) < 4:
                 raise scene_export.ExportError("mark at least 4 points, %d marked" % len(vs.points))
             cam = scene_camera(context)
+            size = tuple(vs.clip.size) if vs.clip else camera_math.render_size(scene_export.camera_dict(cam, scene))
+            check_points_in_image(vs.points, size)
             exe = prefs.find_engine(context)
             folder = os.path.join(scene_export.work_dir(scene), "camera")
             os.makedirs(folder, exist_ok=True)
@@ -118,6 +144,7 @@ class VISCOSCOPE_OT_match_camera(bpy.types.Operator):
             engine.run_quick([exe, "camera", "pnp", "--points", pts_path, "--intrinsics", intr_path, "--out", out_path])
             with open(out_path, encoding="utf-8") as fh:
                 solved = json.load(fh)
+            check_pose_plausible(solved, world, cam.data, k)
             set_camera_from_opencv(cam, solved["R"], solved["t"], k)
             err = solved.get("reprojection_error")
             vs.reprojection_error = float(err) if err is not None else reprojection_rms(solved, world, image)

@@ -5,6 +5,7 @@ import json
 import os
 import re
 import subprocess
+import textwrap
 
 import bpy
 import pytest
@@ -159,6 +160,54 @@ def test_honey_dipper_scene(tmp_path):
     _check_liquid(_liquid_at_last_frame(str(tmp_path / "honey_dipper.blend")), "Honey Inflow", "Honey Dipper")
 
 
+# Inside Blender on a built capture.blend: move the camera away, Match Camera from the sample's
+# points with the engine ($VISCOSCOPE_ENGINE), print where it went.
+MATCH_SCRIPT = textwrap.dedent('''
+    import json, os, sys
+    import bpy
+    sys.path.insert(0, os.path.join(%r, "sample_scenes"))
+    import _common
+    _common.enable_addon()
+    scene = bpy.context.scene
+    vs, cam = scene.viscoscope, scene.viscoscope.camera
+    truth = list(cam.matrix_world.translation)
+    size = list(vs.clip.size) if vs.clip else [scene.render.resolution_x, scene.render.resolution_y]
+    cam.location = (0.05, -0.6, 0.2)
+    vs.work_dir = sys.argv[sys.argv.index("--") + 1]
+    result = bpy.ops.viscoscope.match_camera()
+    print("MATCH " + json.dumps({"result": sorted(result), "truth": truth, "size": size,
+                                 "matched": list(cam.matrix_world.translation), "error": vs.reprojection_error,
+                                 "points": [list(p.image) for p in vs.points]}))
+''') % conftest.REPO
+
+
+def _match_sample_camera(blend, work):
+    script = os.path.join(str(work), "match.py")
+    with open(script, "w") as fh:
+        fh.write(MATCH_SCRIPT)
+    proc = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1", str(blend),
+                           "--python", script, "--", str(work)], capture_output=True, text=True, timeout=300)
+    line = next((l for l in proc.stdout.splitlines() if l.startswith("MATCH ")), None)
+    assert line, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return json.loads(line[len("MATCH "):])
+
+
+def _assert_points_pose_the_camera(match):
+    """The sample's points lie in its clip's image and Match Camera puts the camera back within 2 mm."""
+    w, h = match["size"]
+    for u, v in match["points"]:
+        assert -0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5, (u, v, w, h)
+    assert match["result"] == ["FINISHED"], match
+    assert all(abs(a - b) < 0.002 for a, b in zip(match["matched"], match["truth"])), match
+    assert 0.0 <= match["error"] < 0.1
+
+
+@pytest.mark.engine
+def test_capture_scene_points_match_its_camera(addon, tmp_path, engine_path):
+    _run("capture_scene.py", tmp_path)
+    _assert_points_pose_the_camera(_match_sample_camera(tmp_path / "capture.blend", tmp_path / "work"))
+
+
 def test_capture_scene(addon, tmp_path):
     _run("capture_scene.py", tmp_path)
     with bpy.data.libraries.load(str(tmp_path / "capture.blend")) as (src, dst):
@@ -196,3 +245,6 @@ def test_capture_scene_with_reference_clip(addon, tmp_path, engine_path):
         assert any(b.source == 'MOVIE_CLIP' for b in cam.background_images)
     finally:
         bpy.data.scenes.remove(scene)
+    # The points are marked on the clip itself: Match Camera puts the camera back where it was.
+    match = _match_sample_camera(tmp_path / "capture.blend", tmp_path / "work")
+    _assert_points_pose_the_camera(match)
