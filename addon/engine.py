@@ -296,10 +296,28 @@ def identify_args(engine, job_path, out_dir, threads=0):
         _threads(engine, "identify", threads)
 
 
-def extract_args(engine, video, out_dir, options=None):
+# A job's "extraction" names (observe.h, parseExtractionOptions) → `extract`'s options, so that the
+# Preview's masks are drawn from the same settings as Identify's.
+EXTRACT_OPTIONS = {
+    "first": "--first", "last": "--last", "step": "--step", "fps": "--fps",
+    "background_frames": "--background-frames", "clean_plate": "--clean-plate",
+    "clean_plate_frame": "--clean-plate-frame", "exclude_mask": "--exclude", "weights": "--weights",
+    "mog2_variance_threshold": "--var-threshold", "mog2_minimum_variance": "--min-variance",
+    "mog2_shadow_threshold": "--shadow-threshold", "threshold": "--threshold", "edge_coverage": "--edge-coverage",
+    "close_kernel_px": "--close", "open_kernel_px": "--open", "min_blob_px": "--min-blob",
+}
+
+
+def extract_args(engine, video, out_dir, extraction=None):
+    """`extract` with a job's "extraction" settings (the engine's names) as command-line options."""
     args = [engine, "extract", video, "--out", out_dir, "--progress", "json"]
-    for key, value in (options or {}).items():
-        args += ["--" + key.replace("_", "-"), str(value)]
+    for key, value in (extraction or {}).items():
+        if key == "compensate_gain":
+            args += [] if value else ["--no-gain-compensation"]
+        elif key in EXTRACT_OPTIONS:
+            args += [EXTRACT_OPTIONS[key], str(value)]
+        else:
+            raise EngineError("extraction setting %r has no `extract` option" % key)
     return args
 
 

@@ -50,6 +50,9 @@ class ViscoscopeObjectSettings(bpy.types.PropertyGroup):
     cup_wall: FloatProperty(name="Wall", unit='LENGTH', default=0.003, min=1e-5, precision=4, update=_cup_update)
     cup_bottom: FloatProperty(name="Bottom", unit='LENGTH', default=0.004, min=1e-5, precision=4, update=_cup_update)
     cup_hole_radius: FloatProperty(name="Hole Radius", unit='LENGTH', default=0.009, min=0.0, precision=4, update=_cup_update)
+    transparent: BoolProperty(name="Transparent (glass)", default=False,
+                              description="The liquid shows through this solid in the footage; an opaque "
+                                          "solid hides the liquid behind and inside it in the simulated silhouettes")
     emitter_radius: FloatProperty(name="Radius", unit='LENGTH', default=0.005, min=1e-6, precision=4)
     emitter_flux: FloatProperty(name="Flux", description="Volume per second (scene units³/s)",
                                 default=1e-6, min=0.0, precision=8)
@@ -60,21 +63,30 @@ class ViscoscopeObjectSettings(bpy.types.PropertyGroup):
 class ViscoscopeFluid(bpy.types.PropertyGroup):
     """The fluid material: what a preset stores."""
     description: StringProperty(name="Description", default="")
-    viscosity: FloatProperty(name="Viscosity η", description="Dynamic viscosity in Pa·s",
+    viscosity: FloatProperty(name="η (Pa·s)", description="Dynamic viscosity, Pa·s",
                              default=8.0, min=0.0, soft_max=1000.0, precision=4)
-    density: FloatProperty(name="Density ρ", description="kg/m³", default=1400.0, min=1e-3, soft_max=20000.0)
-    surface_tension: FloatProperty(name="Surface Tension σ", description="N/m", default=0.0, min=0.0, precision=4)
-    slip_length: FloatProperty(name="Slip Length", description="Wall slip length in metres",
+    density: FloatProperty(name="ρ (kg/m³)", description="Density, kg/m³", default=1400.0, min=1e-3, soft_max=20000.0)
+    surface_tension: FloatProperty(name="σ (N/m)", description="Surface tension, N/m", default=0.0, min=0.0, precision=4)
+    slip_length: FloatProperty(name="Slip Length (m)", description="Wall slip length, metres",
                                default=0.0, min=0.0, precision=5)
     model: EnumProperty(name="Model", items=MODEL_ITEMS, default='NEWTONIAN')
     flow_index: FloatProperty(name="Flow Index n", default=1.0, min=1e-3, max=5.0)
-    eta_infinity: FloatProperty(name="η∞", description="Carreau infinite-shear viscosity, Pa·s", default=0.0, min=0.0)
-    relaxation_time: FloatProperty(name="λ", description="Carreau time constant, s", default=1.0, min=0.0)
-    yield_stress: FloatProperty(name="Yield Stress τ0", description="Pa", default=0.0, min=0.0)
+    eta_infinity: FloatProperty(name="η∞ (Pa·s)", description="Carreau infinite-shear viscosity, Pa·s", default=0.0, min=0.0)
+    relaxation_time: FloatProperty(name="λ (s)", description="Carreau time constant, s", default=1.0, min=0.0)
+    yield_stress: FloatProperty(name="τ0 (Pa)", description="Yield stress, Pa", default=0.0, min=0.0)
     color: FloatVectorProperty(name="Colour", subtype='COLOR', size=3, min=0.0, max=1.0,
                                default=(0.8, 0.45, 0.05))
     roughness: FloatProperty(name="Roughness", default=0.05, min=0.0, max=1.0)
     transmission: FloatProperty(name="Transmission", default=0.6, min=0.0, max=1.0)
+
+
+# Where MOG2's background comes from (the job's "clean_plate_frame", "clean_plate" or "background_frames").
+BACKGROUND_ITEMS = [
+    ('PLATE_FRAME', "Plate: Frame of Footage", "Clean plate: one frame of the clip that shows no liquid"),
+    ('PLATE_IMAGE', "Plate: Image File",
+     "Clean plate: a rendered or photographed image of the scene without liquid, the clip's size"),
+    ('LEADING_FRAMES', "First N Frames", "The clip's first frames, which must all show no liquid"),
+]
 
 
 class ViscoscopeJobStatus(bpy.types.PropertyGroup):
@@ -84,6 +96,7 @@ class ViscoscopeJobStatus(bpy.types.PropertyGroup):
     status: StringProperty(name="Status", default="")
     error: StringProperty(name="Error", default="")
     warning: StringProperty(name="Warning", default="")  # the engine's latest, e.g. a grid too coarse
+    note: StringProperty(name="Note", default="")  # what the add-on chose for this run, e.g. a finer grid
     out_dir: StringProperty(name="Output", subtype='DIR_PATH', default="")
     can_resume: BoolProperty(default=False)
 
@@ -111,6 +124,13 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                          poll=lambda self, obj: obj.viscoscope.role == 'CUP')
     fill_volume: FloatProperty(name="Fluid Volume", unit='VOLUME', default=1.7e-4, min=0.0, precision=7)
     # Silhouettes
+    background: EnumProperty(name="Background", items=BACKGROUND_ITEMS, default='PLATE_FRAME',
+                             description="What the background model (MOG2) learns the scene without liquid from")
+    clean_plate_frame: IntProperty(name="Plate Frame", default=0, min=0,
+                                   description="Frame of the footage without liquid, counted from 0 at the clip's "
+                                               "first frame")
+    clean_plate_image: StringProperty(name="Plate Image", subtype='FILE_PATH', default="",
+                                      description="Image of the scene without liquid, the clip's size")
     background_frames: IntProperty(name="Background Frames", default=10, min=1,
                                    description="Leading liquid-free frames that train the background model (MOG2)")
     var_threshold: FloatProperty(name="Variance Threshold", default=16.0, min=0.0,
@@ -130,11 +150,16 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                            "also erases thin streams and small drops)")
     min_blob: IntProperty(name="Smallest Blob", default=3, min=0, max=10000, subtype='PIXEL',
                           description="Drop specks smaller than this many pixels")
+    # The video and extraction settings the overlaid preview masks were made with (JSON).
+    preview_made_with: StringProperty(default="")
     # Identify
-    eta_initial: FloatProperty(name="Initial η", description="Pa·s", default=5.0, min=1e-6, precision=4)
-    eta_spread: FloatProperty(name="Spread", description="Initial CMA-ES spread (factor of η, log space)",
+    eta_initial: FloatProperty(name="Initial η (Pa·s)", description="Dynamic viscosity the search starts from, Pa·s",
+                               default=5.0, min=1e-6, precision=4)
+    eta_spread: FloatProperty(name="Spread (× η)", description="Initial CMA-ES spread, a factor of η (log space)",
                               default=3.0, min=1.01, max=1000.0)
-    identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512)
+    identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512,
+                                     description="Cells along the domain's longest side; raised when the job is "
+                                                 "written if the cup's hole would span too few cells")
     max_generations: IntProperty(name="Max Generations", default=20, min=1, max=1000)
     grid_placements: IntProperty(name="Grid Placements", default=2, min=1, max=8,
                                  description="Score viscosities on this many simulation grids moved by "
@@ -148,6 +173,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     result_eta: FloatProperty(name="η", default=0.0, precision=4)
     result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)
     result_eta_high: FloatProperty(name="η high", default=0.0, precision=4)
+    # Why the result is probably wrong, one reason a line; while there are any, η is not applied.
+    result_doubts: StringProperty(name="Doubts", default="")
+    result_applied: BoolProperty(default=False)
     # Fluid material
     fluid: PointerProperty(type=ViscoscopeFluid)
     # Transfer simulation

@@ -154,7 +154,7 @@ def build_scene(scene, scene_dir, objects=None, depsgraph=None):
                        "height": _field("ground '%s' height" % obj.name, obj.matrix_world.translation.z * scale_length)})
     for obj in by_role.get('CUP', []):
         cup_index[obj.name] = len(solids)
-        solids.append(cup_solid(obj, scale_length))
+        solids.append(dict(cup_solid(obj, scale_length), transparent=obj.viscoscope.transparent))
     mesh_solids = [o for o in by_role.get('SOLID', [])]
     if mesh_solids:
         depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
@@ -168,7 +168,7 @@ def build_scene(scene, scene_dir, objects=None, depsgraph=None):
                 fname += "_"
             used.add(fname)
             write_obj(obj, os.path.join(scene_dir, fname + ".obj"), depsgraph, scale_length)
-            solids.append({"type": "mesh", "path": fname + ".obj"})
+            solids.append({"type": "mesh", "path": fname + ".obj", "transparent": obj.viscoscope.transparent})
 
     liquids = []
     for obj in by_role.get('LIQUID', []):

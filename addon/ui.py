@@ -1,9 +1,12 @@
 """The "Viscoscope" tab of the 3D Viewport sidebar. Panels only lay out properties and operators."""
 
+import textwrap
+
 import bpy
 
 from . import engine, prefs
 from .operators import runner
+from .operators.silhouettes import made_with
 from .presets import VISCOSCOPE_PT_fluid_presets
 
 
@@ -18,6 +21,39 @@ class _ViscoscopePanel:
 
     def draw_header(self, _context):
         DRAWN.add(type(self).__name__)
+
+
+# Width of a character of Blender's UI font at scale 1 (wide ones such as "%" and "m" count: labels
+# that overrun are cut with "…"), and what a label's icon and the panel's margins take.
+CHAR_PX, LABEL_MARGIN_PX = 7.5, 40
+FALLBACK_CHARS = 25  # no region to measure (e.g. a popup): what the sidebar holds at its default width
+
+
+def wrap_width(context):
+    """Characters that fit on one label line across the region being drawn."""
+    region = getattr(context, "region", None)
+    if region is None or region.width <= 1:
+        return FALLBACK_CHARS
+    scale = context.preferences.system.ui_scale or 1.0  # 0 in background mode, where nothing is drawn
+    return max(16, int((region.width - LABEL_MARGIN_PX * scale) / (CHAR_PX * scale)))
+
+
+def draw_message(layout, context, text, icon='NONE', alert=False):
+    """A long message as several labels, so the sidebar does not cut it off; the icon marks the first."""
+    col = layout.column(align=True)
+    col.alert = alert
+    width = wrap_width(context)
+    for paragraph in text.splitlines():
+        for i, line in enumerate(textwrap.wrap(paragraph, width) or [""]):
+            col.label(text=line, icon=icon if i == 0 or icon == 'NONE' else 'BLANK1')
+    return col
+
+
+def draw_labelled(layout, data, prop):
+    """A path or object field under its own label: side by side, the sidebar cuts both short."""
+    col = layout.column(align=True)
+    col.label(text=data.bl_rna.properties[prop].name)
+    col.prop(data, prop, text="")
 
 
 def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
@@ -38,11 +74,13 @@ def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
         if resume_op and st.can_resume:
             row.operator(resume_op, text="Resume", icon='RECOVER_LAST')
         if st.status:
-            col.label(text=st.status, icon='INFO')
+            draw_message(col, context, st.status, icon='INFO')
+    if st.note:
+        draw_message(col, context, st.note, icon='INFO')
     if st.warning:
-        col.label(text=st.warning, icon='ERROR')
+        draw_message(col, context, st.warning, icon='ERROR')
     if st.error and not active:
-        col.label(text=st.error, icon='ERROR')
+        draw_message(col, context, st.error, icon='ERROR', alert=True)
 
 
 class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
@@ -62,8 +100,9 @@ class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
         layout.operator("viscoscope.load_video", icon='FILE_MOVIE')
         if vs.clip:
             col = layout.column(align=True)
-            col.label(text="%s · %d frames · %.3g fps" % (vs.clip.name, vs.clip.frame_duration, vs.clip.fps))
-        layout.prop(vs, "work_dir")
+            draw_message(layout, context, "%s · %d × %d px · %d frames · %.3g fps" % (
+                vs.clip.name, vs.clip.size[0], vs.clip.size[1], vs.clip.frame_duration, vs.clip.fps))
+        draw_labelled(layout, vs, "work_dir")
 
 
 class VIEW3D_PT_viscoscope_camera(_ViscoscopePanel, bpy.types.Panel):
@@ -73,7 +112,7 @@ class VIEW3D_PT_viscoscope_camera(_ViscoscopePanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         vs = context.scene.viscoscope
-        layout.prop(vs, "camera")
+        draw_labelled(layout, vs, "camera")
         row = layout.row()
         row.template_list("VISCOSCOPE_UL_points", "", vs, "points", vs, "points_index", rows=3)
         col = row.column(align=True)
@@ -81,11 +120,11 @@ class VIEW3D_PT_viscoscope_camera(_ViscoscopePanel, bpy.types.Panel):
         col.operator("viscoscope.remove_camera_point", text="", icon='REMOVE')
         if 0 <= vs.points_index < len(vs.points):
             point = vs.points[vs.points_index]
-            layout.prop(point, "world")
-            layout.prop(point, "image")
+            layout.column(align=True).prop(point, "world")
+            layout.column(align=True).prop(point, "image")
         layout.operator("viscoscope.match_camera", icon='CON_CAMERASOLVER')
         if vs.reprojection_error >= 0.0:
-            layout.label(text="Reprojection error: %.2f px" % vs.reprojection_error)
+            draw_message(layout, context, "Reprojection error: %.2f px" % vs.reprojection_error)
         layout.operator("viscoscope.export_camera", icon='EXPORT')
 
 
@@ -102,7 +141,7 @@ class VIEW3D_PT_viscoscope_container(_ViscoscopePanel, bpy.types.Panel):
         layout = self.layout
         vs = context.scene.viscoscope
         layout.operator("viscoscope.add_cup", icon='MESH_CYLINDER')
-        layout.prop(vs, "cup")
+        draw_labelled(layout, vs, "cup")
         if vs.cup is not None:
             cs = vs.cup.viscoscope
             col = layout.column(align=True)
@@ -115,6 +154,8 @@ class VIEW3D_PT_viscoscope_container(_ViscoscopePanel, bpy.types.Panel):
             box = layout.box()
             box.label(text=obj.name, icon='OBJECT_DATA')
             box.prop(obj.viscoscope, "role")
+            if obj.viscoscope.role in {'CUP', 'SOLID'}:
+                box.prop(obj.viscoscope, "transparent")
             if obj.viscoscope.role == 'EMITTER':
                 col = box.column(align=True)
                 for attr in ("emitter_radius", "emitter_flux", "emitter_start", "emitter_end"):
@@ -129,7 +170,17 @@ class VIEW3D_PT_viscoscope_silhouettes(_ViscoscopePanel, bpy.types.Panel):
         layout = self.layout
         vs = context.scene.viscoscope
         col = layout.column(align=True)
-        col.prop(vs, "background_frames")
+        col.label(text="Background")
+        col.prop(vs, "background", expand=True)
+        if vs.background == 'PLATE_FRAME':
+            col.prop(vs, "clean_plate_frame")
+            draw_message(col, context, "Frame %d of the scene's timeline" % (context.scene.frame_start +
+                                                                             vs.clean_plate_frame))
+        elif vs.background == 'PLATE_IMAGE':
+            col.prop(vs, "clean_plate_image", text="")
+        else:
+            col.prop(vs, "background_frames")
+        col = layout.column(align=True)
         col.prop(vs, "var_threshold")
         col.prop(vs, "mask_threshold")
         col.prop(vs, "shadow_threshold")
@@ -138,6 +189,9 @@ class VIEW3D_PT_viscoscope_silhouettes(_ViscoscopePanel, bpy.types.Panel):
         col.prop(vs, "open_diameter")
         col.prop(vs, "min_blob")
         draw_job(layout, context, "extract", "viscoscope.preview_silhouettes", "Preview Silhouettes")
+        if vs.preview_made_with and vs.preview_made_with != made_with(context.scene):
+            draw_message(layout, context, "The masks shown were made from other settings or another clip: "
+                                          "Preview again to see what Identify will use", icon='ERROR')
 
 
 class VIEW3D_PT_viscoscope_identify(_ViscoscopePanel, bpy.types.Panel):
@@ -168,7 +222,13 @@ class VIEW3D_PT_viscoscope_results(_ViscoscopePanel, bpy.types.Panel):
         layout = self.layout
         vs = context.scene.viscoscope
         if vs.result_eta > 0.0:
-            layout.label(text="η = %.4g Pa·s  [%.4g, %.4g]" % (vs.result_eta, vs.result_eta_low, vs.result_eta_high))
+            draw_message(layout, context, "η = %.4g Pa·s, interval %.4g–%.4g Pa·s" % (
+                vs.result_eta, vs.result_eta_low, vs.result_eta_high))
+            for doubt in vs.result_doubts.splitlines():
+                draw_message(layout, context, doubt, icon='ERROR', alert=True)
+            if not vs.result_applied:
+                draw_message(layout, context, "Not applied to the Fluid Material")
+                layout.operator("viscoscope.apply_result", icon='CHECKMARK')
         else:
             layout.label(text="No identification yet")
         for name in ("convergence.png", "landscape.png"):
@@ -187,11 +247,9 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         fluid = context.scene.viscoscope.fluid
+        draw_labelled(layout, fluid, "description")
         col = layout.column(align=True)
-        col.prop(fluid, "description")
         col.prop(fluid, "viscosity")
         col.prop(fluid, "density")
         col.prop(fluid, "surface_tension")

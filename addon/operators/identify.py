@@ -2,46 +2,72 @@
 continues it), then show the result."""
 
 import json
+import math
 import os
 
 import bpy
 
 from .. import engine, prefs, scene_export
 from .runner import EngineOperator, is_running
+from .silhouettes import extraction_settings, reference_video
 
 JOB_FORMAT = "viscoscope.job"
 JOB_VERSION = 1
+
+
+# The viscosity search's bounds (Pa·s): written into the job and used to flag an interval that reaches them.
+ETA_BOUNDS = (1e-3, 1e4)
+# The engine wants a cup's hole at least this many cells across (native/src/scene/scene.cpp,
+# kMinHoleCells): coarser, the cup drains at the wrong rate and η comes out wrong with it.
+MIN_HOLE_CELLS = 4.5
 
 
 def identify_dir(scene):
     return os.path.join(scene_export.work_dir(scene), "identify")
 
 
+def needed_resolution(scene_dict):
+    """The smallest grid resolution at which every cup's hole spans MIN_HOLE_CELLS cells (0: no cup)."""
+    extent = max(hi - lo for lo, hi in zip(scene_dict["domain"]["min"], scene_dict["domain"]["max"]))
+    holes = [s["hole_radius"] for s in scene_dict["solids"] if s["type"] == "cup" and s["hole_radius"] > 0]
+    return max((math.ceil(MIN_HOLE_CELLS * extent / (2 * r) - 1e-9) for r in holes), default=0)
+
+
+def identify_resolution(scene, scene_dict):
+    """(resolution for the job, note): the panel's, raised to what the cup's hole needs."""
+    asked = scene.viscoscope.identify_resolution
+    needed = needed_resolution(scene_dict)
+    if needed <= asked:
+        return asked, ""
+    return needed, "Resolution %d used: the cup's hole needs %.1f cells across" % (needed, MIN_HOLE_CELLS)
+
+
 def write_job(context, folder):
-    """Export scene + camera and write job.json; returns its path."""
+    """Export scene + camera and write job.json; returns (its path, a note for the panel or "")."""
     scene = context.scene
     vs = scene.viscoscope
     if not vs.video_path:
         raise scene_export.ExportError("no reference video: load one in the Reference section")
-    video = bpy.path.abspath(vs.video_path)
-    if not os.path.isfile(video):
-        raise scene_export.ExportError("reference video not found: %s" % video)
+    video = reference_video(scene)
     from .camera import scene_camera
     os.makedirs(folder, exist_ok=True)
-    scene_export.export_scene(scene, os.path.join(folder, "scene.json"))
+    scene_dict = scene_export.export_scene(scene, os.path.join(folder, "scene.json"))
     scene_export.export_camera(scene_camera(context), scene, os.path.join(folder, "blender_camera.json"))
-    masks = os.path.join(scene_export.work_dir(scene), "silhouettes")
+    resolution, note = identify_resolution(scene, scene_dict)
     job = {
         "format": JOB_FORMAT, "version": JOB_VERSION,
         "scene": "scene.json",
         "camera": "blender_camera.json",
+        # Always the video with the panel's settings, never the preview's masks (which may be stale):
+        # the engine extracts again whenever the video or these settings change.
         "video": video,
-        "silhouettes": masks if os.path.isfile(os.path.join(masks, "manifest.json")) else None,
+        "extraction": extraction_settings(scene),
         "frame_start": scene.frame_start, "frame_end": scene.frame_end,
         # The job's spread s is absolute, searched as ln(1 + s/initial); the panel's is a factor f of η.
         "parameters": [{"name": "viscosity", "initial": vs.eta_initial,
-                        "spread": vs.eta_initial * (vs.eta_spread - 1.0), "min": 1e-3, "max": 1e4, "log": True}],
-        "resolution": vs.identify_resolution,
+                        "spread": vs.eta_initial * (vs.eta_spread - 1.0),
+                        "min": ETA_BOUNDS[0], "max": ETA_BOUNDS[1], "log": True}],
+        "resolution": resolution,
         "max_generations": vs.max_generations,
         "grid_placements": vs.grid_placements,
         "grid_placement_schedule": vs.placement_schedule,
@@ -51,11 +77,22 @@ def write_job(context, folder):
     path = os.path.join(folder, "job.json")
     with open(path, "w", encoding="utf-8") as fh:
         json.dump(job, fh, indent=1, allow_nan=False)
-    return path
+    return path, note
+
+
+def bound_doubts(low, high):
+    """The add-on's own doubt: an interval that reaches a search bound did not find η inside them."""
+    out = []
+    for name, end in (("low", low), ("high", high)):
+        for bound in ETA_BOUNDS:
+            if math.isclose(end, bound, rel_tol=1e-6):
+                out.append("The interval's %s end (%.4g Pa·s) is the search bound: η may lie beyond it" % (name, end))
+    return out
 
 
 def read_result(context, out_dir):
-    """Read DIR/result.json into the Results section."""
+    """Read DIR/result.json into the Results section. The Fluid Material takes η only when nothing
+    casts doubt on it; otherwise the panel shows why and offers Apply Anyway."""
     path = os.path.join(out_dir, "result.json")
     with open(path, encoding="utf-8") as fh:
         result = json.load(fh)
@@ -64,15 +101,39 @@ def read_result(context, out_dir):
     if not isinstance(viscosity, dict) or "value" not in viscosity or len(viscosity.get("interval", ())) != 2:
         raise ValueError("%s has no viscosity with an interval" % path)
     eta = float(viscosity["value"])
-    vs.result_eta = eta
-    vs.result_eta_low, vs.result_eta_high = (float(x) for x in viscosity["interval"])
-    vs.fluid.viscosity = eta
+    low, high = (float(x) for x in viscosity["interval"])
+    doubts = [str(d) for d in result.get("doubts") or ()]  # an older engine writes none
+    doubts += bound_doubts(low, high)
+    vs.result_eta, vs.result_eta_low, vs.result_eta_high = eta, low, high
+    vs.result_doubts = "\n".join(doubts)
+    vs.result_applied = not doubts
+    if not doubts:
+        vs.fluid.viscosity = eta
     for name in ("convergence.png", "landscape.png"):
         png = os.path.join(out_dir, name)
         if os.path.isfile(png):
             img = bpy.data.images.load(png, check_existing=True)
             img.reload()
             img.preview_ensure()
+
+
+class VISCOSCOPE_OT_apply_result(bpy.types.Operator):
+    """Write the identified η into the Fluid Material although the engine doubts it"""
+    bl_idname = "viscoscope.apply_result"
+    bl_label = "Apply Anyway"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        vs = context.scene.viscoscope
+        return vs.result_eta > 0.0 and not vs.result_applied
+
+    def execute(self, context):
+        vs = context.scene.viscoscope
+        vs.fluid.viscosity = vs.result_eta
+        vs.result_applied = True
+        self.report({'INFO'}, "η = %.4g Pa·s applied to the Fluid Material" % vs.result_eta)
+        return {'FINISHED'}
 
 
 class _IdentifyBase(EngineOperator):
@@ -89,7 +150,7 @@ class _IdentifyBase(EngineOperator):
         out_dir = os.path.join(folder, "out")
         if self.resume and not os.path.isdir(out_dir):
             raise engine.EngineError("nothing to resume: no identification in %s" % out_dir)
-        job = write_job(context, folder)
+        job, self.note = write_job(context, folder)
         return engine.identify_args(exe, job, out_dir, prefs.threads(context)), out_dir
 
     def on_success(self, context, out_dir):
@@ -132,4 +193,5 @@ class VISCOSCOPE_OT_load_fields(bpy.types.Operator):
         return {'CANCELLED'}
 
 
-classes = (VISCOSCOPE_OT_identify, VISCOSCOPE_OT_identify_resume, VISCOSCOPE_OT_load_fields)
+classes = (VISCOSCOPE_OT_identify, VISCOSCOPE_OT_identify_resume, VISCOSCOPE_OT_apply_result,
+           VISCOSCOPE_OT_load_fields)

@@ -63,7 +63,7 @@ def describe_progress(event):
     return " · ".join(parts) or "Running…"
 
 
-def start(context, kind, args, out_dir, on_success):
+def start(context, kind, args, out_dir, on_success, note=""):
     if kind in ACTIVE and not ACTIVE[kind].job.finished:
         raise engine.EngineError("a %s job is already running" % kind)
     job = engine.EngineJob(args).start()
@@ -73,6 +73,7 @@ def start(context, kind, args, out_dir, on_success):
     st.progress = 0.0
     st.error = ""
     st.warning = ""
+    st.note = note
     st.can_resume = False
     st.status = "Starting…"
     st.out_dir = out_dir
@@ -144,6 +145,8 @@ class EngineOperator:
     job_kind = ""
     _timer = None
 
+    note = ""  # what prepare() chose for the user (shown in the panel while and after the job runs)
+
     def prepare(self, context):
         """Return (engine args, out_dir); raise EngineError/ExportError for bad input."""
         raise NotImplementedError
@@ -154,7 +157,7 @@ class EngineOperator:
     def _start(self, context):
         try:
             args, out_dir = self.prepare(context)
-            start(context, self.job_kind, args, out_dir, self.on_success)
+            start(context, self.job_kind, args, out_dir, self.on_success, self.note)
         except (engine.EngineError, ExportError, UnitError, OSError) as exc:
             status(context, self.job_kind).error = str(exc)
             self.report({'ERROR'}, str(exc))

@@ -153,7 +153,11 @@ def write_report():
     except ImportError:
         drawn = []
     os.makedirs(os.path.dirname(OUT), exist_ok=True)
-    report = {"drawn": drawn, "log": state["log"], "simulation": state["sim"],
+    try:
+        sidebar = view3d()[2].width  # pixels: what the panels wrap their messages to
+    except (StopIteration, ValueError, IndexError):
+        sidebar = None
+    report = {"drawn": drawn, "log": state["log"], "simulation": state["sim"], "sidebar_width": sidebar,
               "registered": hasattr(bpy.types, "VIEW3D_PT_viscoscope_identify")}
     with open(os.path.splitext(OUT)[0] + ".json", "w") as fh:
         json.dump(report, fh, indent=1)

@@ -4,11 +4,13 @@
 The reference avoids the inverse crime: the same Blender scene is simulated by the engine at another
 resolution, particle seed and viscosity than the identification uses, and the engine's own exact
 silhouettes (`score` against an empty reference, whose difference image is then the silhouette)
-become the masks, written where the add-on's Silhouettes step puts them (WORK/silhouettes)."""
+become the footage: a lossless video of bright liquid on a grey table after one empty frame, which
+Identify extracts with the Silhouettes panel's settings like any clip."""
 
 import json
 import math
 import os
+import shutil
 import struct
 import subprocess
 import time
@@ -18,13 +20,14 @@ import bpy
 import pytest
 
 from viscoscope import engine, scene_export
-from viscoscope.operators import container, runner
+from viscoscope.operators import container, identify, runner
 from viscoscope.operators.identify import identify_dir
 
 WIDTH, HEIGHT = 96, 64   # camera image (and reference masks), pixels
 FPS = 10
 FRAMES = (1, 2, 3)       # reference frames = simulation frames (Blender frame_start is time 0)
 ETA_TRUE = 1.5           # Pa·s, the reference's viscosity
+TABLE, LIQUID = 90, 220  # grey levels of the footage
 
 
 def _write_gray_png(path, rows):
@@ -82,27 +85,32 @@ def _make_reference(ctx, engine_path, work):
                "--sim", os.path.join(ref, "sim"), "--sim-first", str(FRAMES[0]), "--out", os.path.join(ref, "score"),
                "--progress", "none")
     assert proc.returncode == 0, proc.stderr
-    silhouettes = os.path.join(work, "silhouettes")
-    os.makedirs(os.path.join(silhouettes, "masks"))
+    footage = os.path.join(ref, "footage")
+    os.makedirs(footage)
+    _write_gray_png(os.path.join(footage, "frame_00000.png"), [[TABLE] * WIDTH for _ in range(HEIGHT)])
     areas, masks = [], []
-    for frame, name in zip(FRAMES, names):
+    for frame in FRAMES:
         rows = _silhouette_rows(os.path.join(ref, "score", "diff_%05d.png" % frame))
         areas.append(sum(v > 0 for row in rows for v in row))
         masks.append(rows)
-        _write_gray_png(os.path.join(silhouettes, name), rows)
-    _write_manifest(silhouettes, names, "synthetic: engine simulate 16^3 seed 7 + exact silhouettes")
+        _write_gray_png(os.path.join(footage, "frame_%05d.png" % frame),
+                        [[LIQUID if v else TABLE for v in row] for row in rows])
+    video = os.path.join(work, "pour.mkv")
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-framerate", str(FPS), "-i",
+                    os.path.join(footage, "frame_%05d.png"), "-c:v", "ffv1", video], check=True)
     # The liquid is seen, and it moves: the column slumps into a film about a cell thick at 16³, so
     # that a fifth or more of the first frame's pixels change by the last. (The film's edge now
     # shows, and the area grew from the first frame to the last, where the smoothed one shrank.)
     assert all(20 < a < WIDTH * HEIGHT // 2 for a in areas), areas
     changed = sum(a != b for row_a, row_b in zip(masks[0], masks[-1]) for a, b in zip(row_a, row_b))
     assert changed > 0.2 * areas[0], (changed, areas)
-    return silhouettes, areas
+    return video, areas
 
 
 def _capture_scene(ctx):
     """Cup (Add Cup), a liquid column on the ground beside it, and a side camera."""
-    container.add_cup(ctx, (0, 0, 0))
+    cup, _ground, _domain = container.add_cup(ctx, (0, 0, 0))
+    cup.viscoscope.cup_hole_radius = 0.0  # the cup holds nothing, so its hole sets no grid size
     vs = ctx.scene.viscoscope
     vs.fill_volume = 0.0  # the liquid is the column below, not the cup's fill
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.075, 0.0, 0.03))
@@ -124,6 +132,8 @@ def _capture_scene(ctx):
 
 @pytest.mark.engine
 def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_path, use_engine, monkeypatch, request):
+    if shutil.which("ffmpeg") is None:
+        pytest.skip("ffmpeg is not installed")
     t0 = time.monotonic()
     out_dir = os.path.join(identify_dir(ctx.scene), "out")
 
@@ -136,11 +146,9 @@ def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_pa
     _capture_scene(ctx)
     vs = ctx.scene.viscoscope
     work = str(tmp_work)
-    silhouettes, areas = _make_reference(ctx, engine_path, work)
-    # The job needs a video on disk; with WORK/silhouettes present the engine uses those masks instead.
-    video = os.path.join(work, "pour.mp4")
-    open(video, "wb").close()
+    video, areas = _make_reference(ctx, engine_path, work)
     vs.video_path = video
+    vs.background, vs.clean_plate_frame = 'PLATE_FRAME', 0
     vs.identify_resolution = 12
     vs.max_generations = 3
     vs.eta_initial, vs.eta_spread = 4.0, 2.0
@@ -168,7 +176,11 @@ def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_pa
     assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'CANCELLED'}
     first_run = time.monotonic() - t_start
     job_doc = json.load(open(os.path.join(identify_dir(ctx.scene), "job.json")))
-    assert job_doc["silhouettes"] == silhouettes and job_doc["resolution"] == 12 and job_doc["max_generations"] == 3
+    assert job_doc["video"] == video and "silhouettes" not in job_doc
+    assert job_doc["resolution"] == 12 and job_doc["max_generations"] == 3
+    # The engine extracted the clip with the panel's settings.
+    extracted = json.load(open(os.path.join(out_dir, "reference", "manifest.json")))
+    assert extracted["parameters"]["close_kernel_px"] == vs.close_diameter
     progress_1 = [(p, s) for n, p, s in seen if n == 1 and p > 0]
     assert progress_1, seen
     assert progress_1[0][1].startswith("Generation 1/3") and "best η" in progress_1[0][1], progress_1
@@ -195,7 +207,10 @@ def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_pa
     assert vs.result_eta == pytest.approx(eta, rel=1e-6) and 1e-3 <= eta <= 1e4
     assert (vs.result_eta_low, vs.result_eta_high) == (pytest.approx(low, rel=1e-6), pytest.approx(high, rel=1e-6))
     assert vs.result_eta_low <= vs.result_eta <= vs.result_eta_high
-    assert vs.fluid.viscosity == pytest.approx(eta, rel=1e-6)
+    # η reaches the Fluid Material unless the engine (or a bound-reaching interval) casts doubt on it.
+    doubts = (result.get("doubts") or []) + identify.bound_doubts(low, high)
+    assert vs.result_doubts.splitlines() == doubts
+    assert (vs.fluid.viscosity == pytest.approx(eta, rel=1e-6)) == (not doubts)
     for plot in ("convergence.png", "landscape.png"):  # drawn when the engine finds matplotlib
         if os.path.isfile(os.path.join(out_dir, plot)):
             assert any(bpy.path.abspath(i.filepath) == os.path.join(out_dir, plot) for i in bpy.data.images), plot

@@ -3,6 +3,8 @@
 import json
 import math
 import os
+import subprocess
+import time
 
 import bpy
 import pytest
@@ -147,3 +149,67 @@ def test_camera_json(ctx, tmp_work):
     for j in range(3):
         assert math.sqrt(sum(m[i][j] ** 2 for i in range(3))) == pytest.approx(1.0)
     assert m[3] == [0, 0, 0, 1]
+
+
+def _simulated_scene(engine_path, scene_path, out_dir):
+    """The scene as the engine read it: `simulate` records it in DIR/simulation.json."""
+    proc = subprocess.run([engine_path, "simulate", scene_path, "--out", out_dir, "--progress", "none"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    with open(os.path.join(out_dir, "simulation.json")) as fh:
+        return json.load(fh)["scene"]
+
+
+@pytest.mark.engine
+def test_transparent_container_round_trips_through_the_engine(ctx, tmp_work, engine_path):
+    """"Transparent (glass)" on the container becomes its solid's "transparent" key, which the engine reads."""
+    cup, _ground, _domain = _cup_scene(ctx, 1.0)
+    vs = ctx.scene.viscoscope
+    vs.sim_resolution, vs.sim_frames = 8, 1
+    assert cup.viscoscope.transparent is False  # opaque unless the artist says otherwise
+    for transparent in (True, False):
+        cup.viscoscope.transparent = transparent
+        path = os.path.join(str(tmp_work), "glass_%s" % transparent, "scene.json")
+        data = scene_export.export_scene(ctx.scene, path)
+        index = next(i for i, s in enumerate(data["solids"]) if s["type"] == "cup")
+        assert data["solids"][index]["transparent"] is transparent
+        read = _simulated_scene(engine_path, path, os.path.join(os.path.dirname(path), "sim"))
+        assert read["solids"][index].get("transparent") is transparent, read["solids"][index]
+
+
+def _engine_warnings(engine_path, scene_path, timeout=120):
+    """The warnings `simulate` gives before its first frame (then it is stopped)."""
+    from viscoscope import engine
+    job = engine.EngineJob([engine_path, "simulate", scene_path, "--out", scene_path + ".sim",
+                            "--progress", "json"]).start()
+    warnings, deadline = [], time.monotonic() + timeout
+    while not job.finished:
+        events = job.poll()
+        warnings += [e["message"] for e in events if e.get("event") == "warning"]
+        if any(e.get("event") == "progress" for e in events):
+            break
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    job.kill()
+    job.wait(30)
+    return warnings + [e["message"] for e in job.poll() if e.get("event") == "warning"]
+
+
+@pytest.mark.engine
+def test_identify_resolution_meets_the_engines_need_for_the_cup(ctx, tmp_work, engine_path):
+    """The job's grid is fine enough for the sample cup's hole by the engine's own measure (no warning),
+    one cell coarser is not, and the panel is told when the add-on raised it."""
+    from viscoscope.operators import identify
+    _cup_scene(ctx, 1.0)
+    vs = ctx.scene.viscoscope
+    data = scene_export.build_scene(ctx.scene, str(tmp_work))
+    resolution, note = identify.identify_resolution(ctx.scene, data)
+    assert resolution > vs.identify_resolution and str(resolution) in note
+    for res, warned in ((resolution, False), (resolution - 1, True)):
+        vs.sim_resolution = res
+        path = os.path.join(str(tmp_work), "res_%d.json" % res)
+        scene_export.export_scene(ctx.scene, path)
+        warnings = _engine_warnings(engine_path, path)
+        assert any("hole" in w for w in warnings) is warned, (res, warnings)
+    vs.identify_resolution = resolution + 4  # a finer grid than needed is kept as asked
+    assert identify.identify_resolution(ctx.scene, data) == (resolution + 4, "")
