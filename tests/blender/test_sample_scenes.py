@@ -182,6 +182,7 @@ MATCH_SCRIPT = textwrap.dedent('''
 
 
 def _match_sample_camera(blend, work):
+    os.makedirs(str(work), exist_ok=True)
     script = os.path.join(str(work), "match.py")
     with open(script, "w") as fh:
         fh.write(MATCH_SCRIPT)
