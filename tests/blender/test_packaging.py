@@ -127,3 +127,31 @@ def test_packaged_engine_finds_its_scripts(tmp_path, bundled_engine):
         assert found == str(installed / "viscoscope" / "scripts" / name), found
         with open(found, "rb") as packaged, open(os.path.join(conftest.REPO, "scripts", name), "rb") as source:
             assert packaged.read() == source.read()
+
+
+@pytest.mark.engine
+def test_packaged_engine_draws_the_plots(ctx, tmp_work, tmp_path, engine_path):
+    """The engine unpacked from the zip, on a small identification, draws its plots: its "done" event
+    does not say "skipped: scripts/plot_identification.py not found"."""
+    import json
+    import test_identify_real
+    from viscoscope import engine
+    from viscoscope.operators import identify
+    zip_path = build_addon_zip.build(str(tmp_path / "dist"), engine_path)
+    with zipfile.ZipFile(zip_path) as zf:
+        zf.extractall(tmp_path / "addons")
+    packaged = tmp_path / "addons" / "viscoscope" / "bin" / "viscoscope"
+    packaged.chmod(0o755)  # as find_engine does for a zip install
+    test_identify_real._capture_scene(ctx)
+    vs = ctx.scene.viscoscope
+    vs.video_path, _areas = test_identify_real._make_reference(ctx, engine_path, str(tmp_work))
+    vs.identify_resolution, vs.max_generations, vs.grid_placements = 12, 1, 1
+    job, _note = identify.write_job(ctx, identify.identify_dir(ctx.scene))
+    env = {k: v for k, v in os.environ.items() if k != "VISCOSCOPE_SCRIPTS"}
+    proc = subprocess.run(engine.identify_args(str(packaged), job, str(tmp_path / "out")), env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    done = [e for e in map(json.loads, proc.stdout.splitlines()) if e.get("event") == "done"][-1]
+    assert "not found" not in done["plots"], done["plots"]
+    matplotlib = subprocess.run(["/usr/bin/python3", "-c", "import matplotlib"]).returncode == 0
+    assert (done["plots"] == "ok") == matplotlib, done["plots"]
