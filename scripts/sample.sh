@@ -26,7 +26,7 @@ cat > "$out/job.json" <<'JOB'
   "scene": "../../sample_scenes/capture_cup.json",
   "camera": "synth/camera.json",
   "video": "synth/reference.mp4",
-  "extraction": {"clean_plate": "synth/clean_plate.png", "exclude_mask": "synth/exclude.png", "weights": "0:0"},
+  "extraction": {"clean_plate": "synth/clean_plate.png", "weights": "0:0"},
   "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.001, "max": 10000}],
   "resolution": 48,
   "grid_placements": 2,

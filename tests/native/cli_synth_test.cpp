@@ -6,6 +6,7 @@
 // Blender-dependent cases skip when blender is not installed.
 #include "cli_support.h"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -168,6 +169,90 @@ TEST_F(CliSynth, ATinySynthMakesAClipThatExtractReadsBack) {
                 sum / score.at("frames").size(), worst, summary["timings"]["simulate_s"].get<double>(),
                 summary["timings"]["render_s"].get<double>(), summary["timings"]["encode_s"].get<double>());
     EXPECT_GT(worst, 0.85);
+}
+
+namespace {
+
+// A cup of liquid draining through its hole onto the ground, seen from the side and 22° above, so
+// that the camera sees into the cup's mouth. `transparent` makes the cup glass, which synth does not
+// draw at all.
+json cupSceneJson(bool transparent) {
+    return {{"format", "viscoscope.scene"},
+            {"version", 1},
+            {"domain", {{"min", {-0.05, -0.05, 0.0}}, {"max", {0.05, 0.05, 0.12}}, {"resolution", 20}}},
+            {"solids",
+             {{{"type", "ground"}, {"height", 0.0}},
+              {{"type", "cup"}, {"position", {0, 0, 0.04}}, {"inner_radius", 0.025}, {"height", 0.04},
+               {"wall_thickness", 0.003}, {"bottom_thickness", 0.004}, {"hole_radius", 0.008},
+               {"transparent", transparent}}}},
+            {"liquids", {{{"type", "cup_fill"}, {"cup", 1}, {"volume", 6.5e-5}}}},
+            {"material", {{"density", 1400}, {"viscosity", 0.3}}},
+            {"fps", 30},
+            {"frames", 10},
+            {"seed", 1},
+            {"output", {{"particles", false}, {"vdb", true}, {"mesh", false}}}};
+}
+
+json cameraAbove() {
+    const Eigen::Vector3d centre(0, -0.25, 0.16), target(0, 0, 0.06);
+    const Eigen::Vector3d forward = (target - centre).normalized();
+    const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
+    const Eigen::Vector3d down = forward.cross(right);
+    Eigen::Matrix3d R;
+    R << right.transpose(), down.transpose(), forward.transpose();
+    const Eigen::Vector3d t = -R * centre;
+    json rows = json::array();
+    for (int i = 0; i < 3; ++i) rows.push_back({R(i, 0), R(i, 1), R(i, 2)});
+    return {{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 64},
+            {"K", {{130, 0, 47.5}, {0, 130, 31.5}, {0, 0, 1}}},
+            {"distortion", {0, 0, 0, 0, 0}},
+            {"R", rows},
+            {"t", {t.x(), t.y(), t.z()}}};
+}
+
+}  // namespace
+
+// The engine's silhouettes of a simulation against Blender's render of the same surfaces, extracted
+// like footage with no mask of the cup: an opaque cup hides the liquid behind and inside it but for
+// what shows through its mouth, a glass one hides nothing. Scoring each render as if its cup were
+// the other kind must do worse, or the depth test would not be what matches them.
+TEST_F(CliSynth, SimulatedSilhouettesSeeWhatBlenderRendersOfACupOpaqueOrGlass) {
+    if (!blenderInstalled()) GTEST_SKIP() << "blender not installed";
+    const fs::path camera = write("camera.json", cameraAbove().dump());
+    for (const bool transparent : {false, true}) {
+        const std::string kind = transparent ? "glass" : "opaque";
+        const fs::path out = dir_ / kind;
+        const fs::path scene = write(kind + ".json", cupSceneJson(transparent).dump());
+        const fs::path otherScene = write(kind + "_other.json", cupSceneJson(!transparent).dump());
+        const CommandResult made = run("synth " + scene.string() + " --camera " + camera.string() + " --out " +
+                                       out.string() + " --seed 5 --samples 4 --supersample 2 --progress none");
+        ASSERT_EQ(made.exitCode, 0) << made.err;
+        const CommandResult extracted =
+            run("extract " + (out / "reference.mp4").string() + " --out " + (out / "extracted").string() +
+                " --clean-plate " + (out / "clean_plate.png").string() + " --progress none");
+        ASSERT_EQ(extracted.exitCode, 0) << extracted.err;
+        const auto iou = [&](const fs::path& asScene, const std::string& name) {
+            const CommandResult scored = run("score --camera " + (out / "camera.json").string() + " --reference " +
+                                             (out / "extracted").string() + " --sim " + (out / "simulation").string() +
+                                             " --scene " + asScene.string() + " --out " + (out / name).string() +
+                                             " --progress none");
+            EXPECT_EQ(scored.exitCode, 0) << scored.err;
+            const json score = json::parse(slurp(out / name / "score.json"));
+            double worst = 1, sum = 0;
+            for (const json& frame : score.at("frames")) {
+                worst = std::min(worst, frame.at("iou").get<double>());
+                sum += frame.at("iou").get<double>();
+            }
+            return std::pair{worst, sum / score.at("frames").size()};
+        };
+        const auto [worst, mean] = iou(scene, "score");
+        const auto [otherWorst, otherMean] = iou(otherScene, "score_other");
+        std::printf("[ synth    ] %s cup seen from above: IoU of the rendered masks against the engine's "
+                    "mean %.3f, worst %.3f; drawn as the other kind: mean %.3f, worst %.3f\n",
+                    kind.c_str(), mean, worst, otherMean, otherWorst);
+        EXPECT_GT(worst, 0.85) << kind;
+        EXPECT_LT(otherMean, mean - 0.05) << kind;
+    }
 }
 
 // Cancelled while Blender renders, synth exits 3 and Blender stops. Run again, it keeps the

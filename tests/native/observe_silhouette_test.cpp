@@ -2,6 +2,7 @@
 #include "observe/observe.h"
 #include "scene/scene.h"
 
+#include <Eigen/Geometry>
 #include <gtest/gtest.h>
 #include <openvdb/tools/LevelSetSphere.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
@@ -198,4 +199,104 @@ TEST(Objective, FollowsEquationNine) {
     EXPECT_EQ(picture(0, 0), picture(0, 1));       // agreement inside
     EXPECT_NE(picture(0, 3), picture(0, 2));       // excluded pixels are darkened
     EXPECT_DOUBLE_EQ(totalObjective({{"silhouette", 1, 0.25}, {"front", 0.5, 0.1}}), 0.3);
+}
+
+namespace {
+
+// A camera at `centre` looking at `target`, world +Z up in the image.
+PinholeCamera cameraLookingAt(int width, int height, double focalPx, const Eigen::Vector3d& centre,
+                              const Eigen::Vector3d& target) {
+    PinholeCamera camera = cameraLookingAlongY(width, height, focalPx, centre);
+    const Eigen::Vector3d forward = (target - centre).normalized();
+    const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
+    camera.R.row(0) = right;
+    camera.R.row(1) = forward.cross(right);  // image down
+    camera.R.row(2) = forward;
+    camera.t = -camera.R * centre;
+    return camera;
+}
+
+// The sample cup's proportions on the ground, in a 20 cm domain.
+Scene cupOnTheGround() {
+    Scene scene;
+    scene.domain.min = {-0.1, -0.1, 0.0};
+    scene.domain.max = {0.1, 0.1, 0.2};
+    scene.domain.resolution = 32;
+    CupSolid cup;
+    cup.position = {0, 0, 0.05};
+    cup.innerRadius = 0.04;
+    cup.height = 0.06;  // rim at z = 0.114
+    scene.solids = {GroundSolid{0.0}, cup};
+    return scene;
+}
+
+openvdb::FloatGrid::Ptr liquidBall(const Eigen::Vector3d& centre, double radius) {
+    return openvdb::tools::createLevelSetSphere<openvdb::FloatGrid>(
+        float(radius), openvdb::Vec3f(float(centre.x()), float(centre.y()), float(centre.z())), float(radius / 20));
+}
+
+}  // namespace
+
+// Liquid inside an opaque cup is hidden by its wall, liquid in front of it is not, and a glass cup
+// hides nothing; from above, the liquid inside shows through the cup's mouth.
+TEST(Visibility, OpaqueSolidsHideTheLiquidBehindAndInsideThem) {
+    Scene scene = cupOnTheGround();
+    const PinholeCamera level = cameraLookingAlongY(160, 120, 300, {0, -0.5, 0.08});
+    const SceneVisibility view = sceneVisibility(scene, level);
+    const auto inside = liquidBall({0, 0, 0.08}, 0.02), inFront = liquidBall({0, -0.07, 0.08}, 0.02);
+
+    const double insideUnseen = silhouetteArea(silhouetteFromLevelSet(*inside, level));
+    const double inFrontUnseen = silhouetteArea(silhouetteFromLevelSet(*inFront, level));
+    ASSERT_GT(insideUnseen, 400);  // a disc of 12 px radius
+    EXPECT_EQ(silhouetteArea(silhouetteFromLevelSet(*inside, level, &view)), 0);
+    EXPECT_EQ(silhouetteArea(silhouetteFromLevelSet(*inFront, level, &view)), inFrontUnseen);
+    EXPECT_EQ(silhouetteArea(silhouetteFromLevelSetFast(*inside, level, &view)), 0);
+    EXPECT_GT(silhouetteArea(silhouetteFromLevelSetFast(*inFront, level, &view)), 0.9 * inFrontUnseen);
+
+    scene.transparentSolids = {1};
+    const SceneVisibility glass = sceneVisibility(scene, level);
+    EXPECT_EQ(silhouetteArea(silhouetteFromLevelSet(*inside, level, &glass)), insideUnseen);
+
+    // From 20° above, the top of a ball raised to 4 mm below the rim shows through the mouth: a line
+    // of sight grazing the near rim is at z = 0.0996 on the axis, and the near wall hides the rest.
+    scene.transparentSolids.clear();
+    const auto raised = liquidBall({0, 0, 0.09}, 0.02);
+    const PinholeCamera above = cameraLookingAt(160, 120, 300, {0, -0.3, 0.2}, {0, 0, 0.09});
+    const SceneVisibility fromAbove = sceneVisibility(scene, above);
+    const double all = silhouetteArea(silhouetteFromLevelSet(*raised, above));
+    const double seen = silhouetteArea(silhouetteFromLevelSet(*raised, above, &fromAbove));
+    std::printf("[ figures  ] ball in the cup from above: %.0f of %.0f px seen through the mouth\n", seen, all);
+    EXPECT_GT(seen, 0.1 * all);
+    EXPECT_LT(seen, 0.5 * all);
+}
+
+// Where no ray meets the space the liquid can reach (the domain outside every solid) before an
+// opaque solid, no θ can show liquid: those pixels leave the comparison, counted.
+TEST(Visibility, LeavesOutThePixelsWhereNoLiquidCanShow) {
+    const Scene scene = cupOnTheGround();
+    // Level, 0.5 m away: the 20 cm domain's near face, 0.4 m away, spans columns 79.5 ± 75.
+    const PinholeCamera level = cameraLookingAlongY(160, 120, 300, {0, -0.5, 0.08});
+    const SceneVisibility view = sceneVisibility(scene, level);
+    EXPECT_EQ(cv::countNonZero(view.liquidCanShow.colRange(0, 4)), 0);
+    EXPECT_EQ(cv::countNonZero(view.liquidCanShow.colRange(156, 160)), 0);
+    EXPECT_EQ(cv::countNonZero(view.liquidCanShow.colRange(6, 154)), 148 * 120);
+    // In front of the cup's wall there is room for liquid: those pixels stay.
+    EXPECT_EQ(view.liquidCanShow(50, 80), 255);
+    EXPECT_GT(view.occluderDepth(50, 80), 0.45);
+    EXPECT_LT(view.occluderDepth(50, 80), 0.46);  // the wall's outer face, 0.043 m before the axis
+
+    cv::Mat1b initial(level.height, level.width, uchar(0));
+    initial(cv::Rect(70, 40, 20, 10)).setTo(255);
+    const ComparedRegion region = comparedRegion({}, view, initial);
+    EXPECT_EQ(region.neverVisible, level.height * level.width - cv::countNonZero(view.liquidCanShow));
+    EXPECT_GT(region.inBackground, 20 * 10);  // the rectangle, widened by 2 px
+    EXPECT_LE(region.inBackground, 24 * 14);
+    EXPECT_EQ(cv::countNonZero(region.compared), cv::countNonZero(view.liquidCanShow) - region.inBackground);
+
+    // Footage with liquid only beside the domain is liquid the simulation can never show.
+    cv::Mat1b outside(level.height, level.width, uchar(0)), inView = outside.clone();
+    outside(cv::Rect(0, 40, 4, 10)).setTo(255);
+    inView(cv::Rect(70, 40, 4, 10)).setTo(255);
+    EXPECT_DOUBLE_EQ(liquidOutOfViewShare({outside, inView}, {}, view), 0.5);
+    EXPECT_DOUBLE_EQ(liquidOutOfViewShare({inView}, {}, view), 0.0);
 }

@@ -87,6 +87,8 @@ Command addExtractCommand(CLI::App& app) {
     sub->add_option("--background-frames", o.backgroundFrames, "Leading liquid-free frames that train MOG2")
         ->capture_default_str();
     sub->add_option("--clean-plate", args->cleanPlate, "Image of the scene without liquid (instead of leading frames)");
+    sub->add_option("--clean-plate-frame", o.cleanPlateFrame,
+                    "Index of a frame of the source that shows no liquid outside the container: the clean plate");
     sub->add_option("--exclude", args->excludeMask, "PNG, nonzero = pixels left out of the comparison");
     sub->add_option("--exclude-polygons", args->excludePolygons, "JSON [[[x,y],...],...] of excluded polygons");
     sub->add_option("--weights", o.weights, "Frame weights: \"0-10:1,11-20:0\" or one value per frame \"1,1,0\"");

@@ -88,19 +88,27 @@ std::optional<Scene> scoredScene(const ScoreArguments& args) {
     return loadRecordedScene(record);
 }
 
-// A surface's silhouette; with `solids`, as identify draws it: the parts of the liquid surface
-// inside solids (below the ground, in walls) removed, since no camera sees liquid there.
+// The scene's solids and what the camera sees of them; with these, surfaces are drawn as identify
+// draws them: the parts inside solids (below the ground, in walls) removed, and what an opaque solid
+// hides left out.
+struct ScoredSolids {
+    sim::SolidField field;
+    SceneVisibility view;
+};
+
+// A surface's silhouette, as identify draws it when `solids` are known.
 cv::Mat1b simulatedSilhouette(const fs::path& file, const PinholeCamera& camera, bool fast,
-                              const std::string& cameraFile, const sim::SolidField* solids) {
+                              const std::string& cameraFile, const ScoredSolids* solids) {
+    const SceneVisibility* view = solids ? &solids->view : nullptr;
     if (file.extension() == ".vdb") {
         const openvdb::FloatGrid::Ptr grid = readSurfaceGrid(file);
         requireInFront(camera, boundingBoxCorners(*grid), cameraFile, file);
-        if (solids) surface::clipToSolidExterior(*grid, *solids);
-        return fast ? silhouetteFromLevelSetFast(*grid, camera) : silhouetteFromLevelSet(*grid, camera);
+        if (solids) surface::clipToSolidExterior(*grid, solids->field);
+        return fast ? silhouetteFromLevelSetFast(*grid, camera, view) : silhouetteFromLevelSet(*grid, camera, view);
     }
     const TriangleMesh mesh = loadMesh(file);  // meshes are already cheap to fill: no fast path
     requireInFront(camera, mesh.vertices, cameraFile, file);
-    return rasterizeMesh(mesh.vertices, mesh.triangles, camera);
+    return rasterizeMesh(mesh.vertices, mesh.triangles, camera, view);
 }
 
 void writeJsonAtomically(const nlohmann::json& doc, const fs::path& file) {
@@ -130,9 +138,23 @@ int runScore(const ScoreArguments& args) {
         requireGroundBandBelowOutlet(*scene, args.groundBand, "--ground-band");
         compared = excludeGroundBand(compared, camera, *scene, args.groundBand);
     }
-    const std::unique_ptr<sim::SolidField> solids =
-        scene ? std::make_unique<sim::SolidField>(scene->solids, sim::sceneGrid(*scene)) : nullptr;
+    const std::unique_ptr<ScoredSolids> solids =
+        scene ? std::make_unique<ScoredSolids>(
+                    ScoredSolids{sim::SolidField(scene->solids, sim::sceneGrid(*scene)), sceneVisibility(*scene, camera)})
+              : nullptr;
     bool clipped = solids != nullptr;  // and every frame a level set (meshes are drawn as they are)
+    nlohmann::json leftOut;
+    if (solids) {
+        // As identify: the footage's own background holds the liquid of its first frame, here SIM's.
+        const cv::Mat1b initial = backgroundFromFootage(reference)
+                                      ? simulatedSilhouette(simulationFrame(args.sim, 0), camera, args.fast,
+                                                            args.camera, solids.get())
+                                      : cv::Mat1b();
+        const ComparedRegion region = comparedRegion(compared, solids->view, initial);
+        compared = region.compared;
+        leftOut = {{"left_out_never_visible", region.neverVisible},
+                   {"left_out_liquid_in_background", region.inBackground}};
+    }
     fs::create_directories(args.outDir);
     fs::remove(fs::path(args.outDir) / "score.json");
 
@@ -167,6 +189,7 @@ int runScore(const ScoreArguments& args) {
                                {"clipped_to_solids", clipped}, {"ground_band_m", args.groundBand},
                                {"camera", args.camera},       {"reference", args.reference},
                                {"sim", args.sim},             {"pixels", reference.width * reference.height},
+                               {"compared_pixels", leftOut},
                                {"E", objective},              {"frames", frames}};
     writeJsonAtomically(score, fs::path(args.outDir) / "score.json");
     progress.report({{"event", "done"}, {"E", objective}});

@@ -79,11 +79,13 @@ PinholeCamera supersampled(PinholeCamera camera, int factor) {
     return camera;
 }
 
-// Every solid but the ground, as one mesh: what the camera sees of the container.
+// Every opaque solid but the ground, as one mesh: what the camera sees of the container. A
+// transparent solid is not drawn at all: the render does not model a glass's refraction.
 TriangleMesh containerMesh(const Scene& scene) {
     TriangleMesh all;
-    for (const Solid& solid : scene.solids) {
-        const TriangleMesh part = surface::solidBoundary(solid);
+    for (size_t i = 0; i < scene.solids.size(); ++i) {
+        if (!scene.isOpaque(i)) continue;
+        const TriangleMesh part = surface::solidBoundary(scene.solids[i]);
         const int offset = static_cast<int>(all.vertices.size());
         all.vertices.insert(all.vertices.end(), part.vertices.begin(), part.vertices.end());
         for (const Eigen::Vector3i& t : part.triangles) all.triangles.push_back(t + Eigen::Vector3i::Constant(offset));
@@ -99,14 +101,12 @@ void requireDomainInView(const Scene& scene, const PinholeCamera& camera, const 
         throw InputError(cameraFile + ": the camera sees none of the simulation domain (it looks away from the scene)");
 }
 
-// Liquid pixels the camera sees in frame f (outside the container), from the surface mesh. An empty
-// OBJ is a frame without liquid.
-double visibleLiquidPixels(const fs::path& obj, const PinholeCamera& camera, const cv::Mat1b& excluded) {
+// Liquid pixels the camera sees in frame f (what the opaque solids do not hide), from the surface
+// mesh. An empty OBJ is a frame without liquid.
+double visibleLiquidPixels(const fs::path& obj, const PinholeCamera& camera, const SceneVisibility& view) {
     if (fs::file_size(obj) == 0) return 0;
     const TriangleMesh mesh = loadMesh(obj);
-    cv::Mat1b mask = rasterizeMesh(mesh.vertices, mesh.triangles, camera);
-    mask.setTo(0, excluded);
-    return cv::countNonZero(mask);
+    return cv::countNonZero(rasterizeMesh(mesh.vertices, mesh.triangles, camera, &view));
 }
 
 // Runs Blender on the render script with `spec`, its output into `log`. Calls `poll` while waiting.
@@ -205,13 +205,15 @@ int runSynth(const SynthArguments& args) {
     if (simulateIntoFolder(scene, simulation, progress) == kExitCancelled) return kExitCancelled;
     const double simulateSeconds = secondsSince(start);
 
-    // 2. The container: its projection is C_f's excluded region, its mesh is rendered.
+    // 2. The container: its mesh is rendered, and its projection is an exclusion mask for jobs that
+    // want one (identify needs none: it depth-tests against the solids).
     const TriangleMesh container = containerMesh(scene);
     const cv::Mat1b excluded = rasterizeMesh(container.vertices, container.triangles, camera);
+    const SceneVisibility view = sceneVisibility(scene, camera);
     nlohmann::json visible = nlohmann::json::array();
     double anyVisible = 0;
     for (int f = 0; f <= scene.frames; ++f) {
-        visible.push_back(visibleLiquidPixels(simulation / frameName("frame", f, "obj"), camera, excluded));
+        visible.push_back(visibleLiquidPixels(simulation / frameName("frame", f, "obj"), camera, view));
         anyVisible += visible.back().get<double>();
     }
     if (anyVisible == 0)

@@ -99,6 +99,16 @@ double simulatedObservable(const MeasuredTrack& track, const sim::Simulation& si
     return puddleDiameter(particles, track.origin, ground) / 2;
 }
 
+// The liquid the camera sees at the start, before it moves: the same for every θ.
+cv::Mat1b initialSilhouette(const Job& job, const SceneVisibility& view) {
+    std::vector<double> theta;
+    for (const ParameterSpec& p : job.parameters) theta.push_back(p.initial);
+    const sim::Simulation simulation(sceneWithParameters(job, theta, job.resolution, 0));
+    const auto levelSet = surface::liquidLevelSet(simulation);
+    surface::clipToSolidExterior(*levelSet, simulation.solids());
+    return silhouetteFromLevelSet(*levelSet, job.camera, &view);
+}
+
 bool hasSilhouettes(const Observation& obs) {
     return std::any_of(obs.masks.begin(), obs.masks.end(), [](const cv::Mat1b& m) { return !m.empty(); });
 }
@@ -145,7 +155,6 @@ Observation loadObservation(const Job& job) {
         throw InputError(job.cameraFile.string() + ": camera image is " + std::to_string(job.camera.width) + "x" +
                          std::to_string(job.camera.height) + ", reference masks are " + std::to_string(ref.width) +
                          "x" + std::to_string(ref.height));
-    if (silhouettes) obs.compared = excludeGroundBand(ref.comparedPixels(), job.camera, job.scene, job.groundBand);
     obs.masks.resize(ref.frames.size());
     obs.simFrames.assign(ref.frames.size(), -1);
     int used = 0;
@@ -161,6 +170,16 @@ Observation loadObservation(const Job& job) {
     if (used == 0)
         throw InputError(origin + ": no reference frames to compare (all weights 0, or all outside the job's "
                                   "frame range / before the simulation starts)");
+    if (silhouettes) {
+        obs.view = sceneVisibility(job.scene, job.camera);
+        const cv::Mat1b compared = excludeGroundBand(ref.comparedPixels(), job.camera, job.scene, job.groundBand);
+        obs.referenceOutOfView = liquidOutOfViewShare(obs.masks, compared, obs.view);
+        const ComparedRegion region =
+            comparedRegion(compared, obs.view, backgroundFromFootage(ref) ? initialSilhouette(job, obs.view) : cv::Mat1b());
+        obs.compared = region.compared;
+        obs.neverVisiblePixels = region.neverVisible;
+        obs.inBackgroundPixels = region.inBackground;
+    }
     if (job.measuredTrack) {
         obs.measured = measuredAtFrames(*job.measuredTrack, obs);
         std::vector<double> compared;
@@ -341,8 +360,9 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
         }
         if (compared && silhouettes) {
             surface::clipToSolidExterior(*levelSet, simulation.solids());
-            const cv::Mat1b silhouette = job.exactSilhouettes ? silhouetteFromLevelSet(*levelSet, job.camera)
-                                                              : silhouetteFromLevelSetFast(*levelSet, job.camera);
+            const cv::Mat1b silhouette = job.exactSilhouettes
+                                             ? silhouetteFromLevelSet(*levelSet, job.camera, &obs.view)
+                                             : silhouetteFromLevelSetFast(*levelSet, job.camera, &obs.view);
             for (size_t i = 0; i < count; ++i) {
                 if (obs.simFrames[i] != frame) continue;
                 ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared, job.silhouetteComparison);

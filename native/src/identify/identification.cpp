@@ -66,6 +66,7 @@
 #include <functional>
 #include <iomanip>
 #include <map>
+#include <sstream>
 
 namespace viscoscope::identify {
 
@@ -457,6 +458,70 @@ double boundPenalty(const Eigen::VectorXd& x, const LogSearchSpace& space) {
     return p;
 }
 
+namespace {
+
+// A doubt is a reason to think θ* wrong, one line each: result.json's "doubts", also sent as warnings.
+// The reference's liquid outside what the simulation can ever show, past this share of it: a camera
+// or domain that does not match the footage, not extraction noise along the outline.
+constexpr double kOutOfViewDoubtShare = 0.05;
+// E over the full-fidelity evaluations changes by less than this share of its least value while they
+// span at least kFlatSpan in some parameter: the footage does not tell those θ apart.
+constexpr double kFlatObjectiveShare = 0.05;
+constexpr double kFlatSpan = 2.0;
+
+json doubtsBeforeSearch(const Observation& obs) {
+    json doubts = json::array();
+    if (obs.referenceOutOfView > kOutOfViewDoubtShare) {
+        char line[400];
+        std::snprintf(line, sizeof line,
+                      "reference: %.0f %% of the footage's liquid lies where the simulated liquid can never be seen "
+                      "(outside the simulation domain, or behind an opaque solid): check the camera and the domain",
+                      100 * obs.referenceOutOfView);
+        doubts.push_back(line);
+    }
+    return doubts;
+}
+
+json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const IdentificationResult& result,
+                       const json& evaluated) {
+    json doubts = json::array();
+    for (size_t i = 0; i < job.parameters.size(); ++i) {
+        const std::string& name = job.parameters[i].name;
+        const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
+        for (const double bound : {lower, upper})
+            if (std::abs(std::log(result.interval[i][bound == lower ? 0 : 1] / bound)) < 1e-6) {
+                std::ostringstream line;
+                line << name << ": the interval reaches the search bound " << bound
+                     << ", so the footage does not bound it there";
+                doubts.push_back(line.str());
+            }
+    }
+    double least = INFINITY, most = -INFINITY;
+    std::vector<double> thetaLow(job.parameters.size(), INFINITY), thetaHigh(job.parameters.size(), 0);
+    for (const json& e : evaluated) {
+        if (e.at("fidelity") != kFull || e.at("E").is_null()) continue;
+        least = std::min(least, e.at("E").get<double>());
+        most = std::max(most, e.at("E").get<double>());
+        for (size_t i = 0; i < thetaLow.size(); ++i) {
+            thetaLow[i] = std::min(thetaLow[i], e.at("theta")[i].get<double>());
+            thetaHigh[i] = std::max(thetaHigh[i], e.at("theta")[i].get<double>());
+        }
+    }
+    for (size_t i = 0; i < thetaLow.size(); ++i)
+        if (thetaHigh[i] >= kFlatSpan * thetaLow[i] && most - least < kFlatObjectiveShare * least) {
+            std::ostringstream line;
+            line << "E is nearly flat: it changes by " << std::setprecision(2) << 100 * (most - least) / least
+                 << " % over " << job.parameters[i].name << " from " << std::setprecision(4) << thetaLow[i] << " to "
+                 << thetaHigh[i] << ", so the footage hardly tells these apart (check the camera, the masks and "
+                                    "what the clip shows)";
+            doubts.push_back(line.str());
+            break;
+        }
+    return doubts;
+}
+
+}  // namespace
+
 IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const IdentifyOptions& options) {
     const auto sessionStart = Clock::now();
     fs::create_directories(outDir);
@@ -475,8 +540,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                            "liquid out of sight fits as well, so the result is at best a lower bound (use a "
                            "longer clip)");
     }
+    json doubts = doubtsBeforeSearch(obs);
     if (options.onWarning)
         for (const json& w : warnings) options.onWarning(w.get<std::string>());
+    if (options.onWarning)
+        for (const json& d : doubts) options.onWarning(d.get<std::string>());
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
@@ -949,6 +1017,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
     for (const json& g : generations)
         if (g.contains("warning")) warnings.push_back(g.at("warning"));
+    for (const json& d : doubtsAfterSearch(job, bounds, result, evaluated)) {
+        if (options.onWarning) options.onWarning(d.get<std::string>());
+        doubts.push_back(d);
+    }
+    for (const json& d : doubts) warnings.push_back(d);
     json doc{{"format", "viscoscope.identify_result"},
              {"version", 1},
              {"job", job.file.string()},
@@ -976,6 +1049,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
              {"reference_informative_frames", informativeFrames},
              {"ground_band_m", job.groundBand},
              {"warnings", warnings},
+             {"doubts", doubts},
+             {"compared_pixels",
+              {{"left_out_never_visible", obs.neverVisiblePixels},
+               {"left_out_liquid_in_background", obs.inBackgroundPixels},
+               {"reference_liquid_out_of_view_share", obs.referenceOutOfView}}},
              {"history", generations},
              {"evaluated", evaluated},
              {"timings", {{"wall_s", elapsed},

@@ -234,6 +234,12 @@ struct Observation {
     ReferenceManifest reference;
     std::vector<cv::Mat1b> masks;  // per reference frame (empty Mat where ω_f = 0)
     cv::Mat1b compared;            // C_f (empty = all pixels)
+    // With silhouettes: what the camera sees of the scene (the simulated silhouettes are depth-tested
+    // against its opaque solids), and the pixels left out of C where the footage cannot show liquid
+    // whatever θ is (comparedRegion), with the share of the reference's liquid that lies there.
+    SceneVisibility view;
+    int neverVisiblePixels = 0, inBackgroundPixels = 0;
+    double referenceOutOfView = 0;
     std::vector<int> simFrames;    // the simulation frame matched to each reference frame
     std::optional<ScalarTrack> track;  // with an "area_px" column: the job's CSV or the masks' area
     double trackWeight = 0;

@@ -248,7 +248,11 @@ void validateOptions(const ExtractionOptions& o) {
     if (o.first < 0) throw InputError("--first must be ≥ 0");
     if (o.last >= 0 && o.last < o.first) throw InputError("--last must be ≥ --first");
     if (o.step < 1) throw InputError("--step must be ≥ 1");
-    if (!o.cleanPlate && o.backgroundFrames < 1) throw InputError("--background-frames must be ≥ 1 without a clean plate");
+    if (!o.cleanPlate && !o.cleanPlateFrame && o.backgroundFrames < 1)
+        throw InputError("--background-frames must be ≥ 1 without a clean plate");
+    if (o.cleanPlate && o.cleanPlateFrame)
+        throw InputError("--clean-plate and --clean-plate-frame both name a clean plate: give one");
+    if (o.cleanPlateFrame && *o.cleanPlateFrame < 0) throw InputError("--clean-plate-frame must be ≥ 0");
     if (o.threshold < 0 || o.threshold > 254) throw InputError("--threshold must be in [0, 254]");
     if (!(o.shadowThreshold > 0 && o.shadowThreshold <= 1)) throw InputError("--shadow-threshold must be in (0, 1]");
     if (!(o.edgeCoverage >= 0 && o.edgeCoverage < 1)) throw InputError("--edge-coverage must be in [0, 1)");
@@ -292,6 +296,16 @@ void learnBackground(SilhouetteExtractor& extractor, const fs::path& source, con
     }
     FrameSource frames(source, options.fps);
     cv::Mat frame;
+    if (options.cleanPlateFrame) {
+        while (frames.nextIndex() < *options.cleanPlateFrame)
+            if (!frames.skip()) break;
+        if (!frames.read(frame))
+            throw InputError(source.string() + ": has " + std::to_string(frames.nextIndex()) +
+                             " frames; the clean plate frame " + std::to_string(*options.cleanPlateFrame) +
+                             " is not among them");
+        extractor.learnCleanPlate(frame);
+        return;
+    }
     for (int i = 0; i < options.backgroundFrames; ++i) {
         if (!frames.read(frame))
             throw InputError(source.string() + ": has " + std::to_string(i) + " frames, fewer than the " +
@@ -363,6 +377,11 @@ void writeManifest(const ReferenceManifest& m, const fs::path& file) {
 
 }  // namespace
 
+const char* backgroundSourceName(const ExtractionOptions& options) {
+    if (options.cleanPlate) return "clean_plate";
+    return options.cleanPlateFrame ? "clean_plate_frame" : "leading_frames";
+}
+
 nlohmann::json extractionParameters(const ExtractionOptions& o) {
     nlohmann::json polygons = nlohmann::json::array();
     for (const auto& polygon : o.excludePolygons) {
@@ -374,9 +393,10 @@ nlohmann::json extractionParameters(const ExtractionOptions& o) {
             {"first", o.first},
             {"last", o.last},
             {"step", o.step},
-            {"background", o.cleanPlate ? "clean_plate" : "leading_frames"},
-            {"background_frames", o.cleanPlate ? 0 : o.backgroundFrames},
+            {"background", backgroundSourceName(o)},
+            {"background_frames", o.cleanPlate || o.cleanPlateFrame ? 0 : o.backgroundFrames},
             {"clean_plate", o.cleanPlate ? fs::absolute(*o.cleanPlate).string() : ""},
+            {"clean_plate_frame", o.cleanPlateFrame ? *o.cleanPlateFrame : -1},
             {"mog2_variance_threshold", o.varianceThreshold},
             {"mog2_minimum_variance", o.minimumVariance},
             {"mog2_detect_shadows", true},
@@ -395,7 +415,8 @@ nlohmann::json extractionParameters(const ExtractionOptions& o) {
 ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
     if (!doc.is_object()) throw InputError(origin + ": must be an object");
     static const std::vector<std::string> known{
-        "first", "last", "step", "fps", "background_frames", "clean_plate", "exclude_mask", "exclude_polygons",
+        "first", "last", "step", "fps", "background_frames", "clean_plate", "clean_plate_frame", "exclude_mask",
+        "exclude_polygons",
         "weights", "mog2_variance_threshold", "mog2_minimum_variance", "mog2_shadow_threshold", "compensate_gain",
         "threshold", "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
     for (const auto& [name, value] : doc.items())
@@ -409,6 +430,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
     if (doc.contains("fps")) o.fps = in.number("fps", 0);
     o.backgroundFrames = in.integer("background_frames", o.backgroundFrames);
     o.cleanPlate = in.file("clean_plate", baseDir);
+    if (doc.contains("clean_plate_frame")) o.cleanPlateFrame = in.integer("clean_plate_frame", 0);
     o.excludeMask = in.file("exclude_mask", baseDir);
     if (doc.contains("exclude_polygons")) {
         try {

@@ -44,9 +44,11 @@ struct ExtractionOptions {
     int step = 1;
     std::optional<double> fps;  // overrides the video's own; required for image folders
     // The background model: MOG2 (Zivkovic 2004) learned from the source's first
-    // `backgroundFrames` frames, which must show no liquid, or from a clean-plate image.
+    // `backgroundFrames` frames, which must show no liquid, or from a clean plate: an image, or one
+    // frame of the source itself that shows no liquid outside the container (its index).
     int backgroundFrames = 10;
     std::optional<std::filesystem::path> cleanPlate;
+    std::optional<int> cleanPlateFrame;
     double varianceThreshold = 16;  // MOG2's squared Mahalanobis distance for "foreground"
     // The floor on each pixel's learned variance (grey levels²). Compressed video re-quantizes a
     // static scene differently from frame to frame once anything moves, so the few learning frames
@@ -126,9 +128,13 @@ inline constexpr int kExtractionRevision = 2;
 // identify compares to tell whether silhouettes extracted earlier (perhaps by an engine with other
 // defaults or another extraction) still hold.
 nlohmann::json extractionParameters(const ExtractionOptions& options);
+// Where the background model comes from, as "parameters" records it: "clean_plate" (an image),
+// "clean_plate_frame" (a frame of the source) or "leading_frames". With the last two the liquid
+// the footage shows in those frames is part of the background, and extraction cannot see it there.
+const char* backgroundSourceName(const ExtractionOptions& options);
 // ExtractionOptions from a JSON object (a job's "extraction"), with the names `extract` records in
 // manifest.json's "parameters": first, last, step, fps, background_frames, clean_plate,
-// exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
+// clean_plate_frame, exclude_mask, exclude_polygons ([[[x, y], ...], ...] px), weights, mog2_variance_threshold,
 // mog2_minimum_variance, compensate_gain, threshold, mog2_shadow_threshold, edge_coverage, close_kernel_px,
 // open_kernel_px, min_blob_px. Missing names keep their defaults; paths resolve against `baseDir` ("" = none).
 // Unknown names, wrong types, bad values and missing files throw InputError("<origin>.<name>: ...").
@@ -191,28 +197,75 @@ double drainedVolume(const std::vector<Eigen::Vector3d>& particles, double parti
 // ---------------------------------------------------------------------------------------------
 // Simulated silhouettes
 
-// Fills every projected triangle into one mask (their union), sampling at pixel centres.
+// What the camera can see of the scene, per pixel (sampled at its centre): how deep (z in the camera
+// frame, m) the nearest opaque solid lies, and whether liquid could be in view there at all. Solids
+// do not move, so one map serves every simulation of a scene through one camera.
+struct SceneVisibility {
+    cv::Mat1f occluderDepth;  // nearest opaque solid, +inf where none; empty = nothing hides anything
+    // 255 where some point the liquid can reach (inside the domain, outside every solid) lies in front
+    // of the nearest opaque solid; 0 where no simulation, whatever its θ, can show liquid.
+    cv::Mat1b liquidCanShow;
+    // Liquid resting on a solid touches it within its surface's voxel, so liquid up to this far
+    // (m) behind an occluder still shows: a puddle's edge on the ground, the liquid lining a wall.
+    double depthTolerance = 0;
+
+    bool shows(int row, int column, double depth) const {
+        return depth <= occluderDepth(row, column) + depthTolerance;
+    }
+};
+// The scene's opaque solids (all but scene.transparentSolids; the ground plane included) drawn into
+// a depth buffer, and the liquid's reach found by marching each pixel's ray through the domain.
+SceneVisibility sceneVisibility(const Scene& scene, const PinholeCamera& camera);
+
+// The compared pixels C (empty = all) without those where the footage cannot show liquid whatever θ
+// is: where no liquid can be in view, and, when the reference's background was learned from the
+// footage itself (backgroundFromFootage), where the liquid of the start lies (`initialLiquid`, its
+// simulated silhouette, widened by 2 px for its outline; empty = none): that liquid is part of the
+// background, so extraction can see neither it nor its leaving.
+struct ComparedRegion {
+    cv::Mat1b compared;    // 255 = compared
+    int neverVisible = 0;  // pixels of C left out because no liquid can be seen there
+    int inBackground = 0;  // ... because the background holds liquid there
+};
+ComparedRegion comparedRegion(const cv::Mat1b& compared, const SceneVisibility& view, const cv::Mat1b& initialLiquid);
+// Whether the reference's background model holds the footage's own first frames (its manifest's
+// "background" is "clean_plate_frame" or "leading_frames"), not a separate clean plate image.
+bool backgroundFromFootage(const ReferenceManifest& reference);
+// The share of the reference's liquid pixels within `compared` (over `masks`, empty ones skipped)
+// that lie where no liquid can be in view: footage that the camera or the domain does not match.
+double liquidOutOfViewShare(const std::vector<cv::Mat1b>& masks, const cv::Mat1b& compared,
+                            const SceneVisibility& view);
+
+// Fills every projected triangle into one mask (their union), sampling at pixel centres; with a
+// `view`, only where the triangle lies in front of the opaque solids (a depth test).
 // Triangles crossing the camera's near plane are clipped against it; geometry behind is ignored.
 // Triangle edges stay straight in the image: with lens distortion, keep triangles small.
 cv::Mat1b rasterizeMesh(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles,
-                        const PinholeCamera& camera);
+                        const PinholeCamera& camera, const SceneVisibility* view = nullptr);
+// The camera depth of the nearest triangle at each pixel centre (+inf where none): a depth buffer.
+cv::Mat1f nearestDepth(const std::vector<Eigen::Vector3d>& vertices, const std::vector<Eigen::Vector3i>& triangles,
+                       const PinholeCamera& camera);
 
 // The zero level set (negative inside) as triangles, via openvdb::tools::volumeToMesh.
 // (TriangleMesh and loadMesh, for OBJ/PLY files, come from sim/sim.h.)
 TriangleMesh meshFromLevelSet(const openvdb::FloatGrid& levelSet);
 
-cv::Mat1b silhouetteFromLevelSet(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
+cv::Mat1b silhouetteFromLevelSet(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera,
+                                 const SceneVisibility* view = nullptr);
 // The fast approximate path: splats each particle as its projected disc, then closes the mask
-// with a kernel of `closeKernel` px to fill gaps between discs.
+// with a kernel of `closeKernel` px to fill gaps between discs. With a `view`, a particle behind
+// the opaque solids at the pixel it projects to is not drawn.
 cv::Mat1b silhouetteFromParticles(const std::vector<Eigen::Vector3d>& points, double radius,
-                                  const PinholeCamera& camera, int closeKernel = 3);
+                                  const PinholeCamera& camera, int closeKernel = 3,
+                                  const SceneVisibility* view = nullptr);
 // The fast path for a level set: splats the inner band voxels (−h ≤ φ ≤ 0) as discs of radius h/2
 // and closes the gaps. Any ray through a closed surface crosses that band, so it covers the
 // silhouette without meshing. (h/2 rather than the half diagonal: that bloats the outline by about
 // a third of a voxel and lowers the IoU against the exact path from 0.99 to 0.97.) A disc smaller
 // than a pixel still fills the pixel it falls in, so outlines come out up to about a pixel wider
 // than the exact path's: a preview, not what identify compares.
-cv::Mat1b silhouetteFromLevelSetFast(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera);
+cv::Mat1b silhouetteFromLevelSetFast(const openvdb::FloatGrid& levelSet, const PinholeCamera& camera,
+                                     const SceneVisibility* view = nullptr);
 // World positions of the level set's inner band voxels (what the fast path splats).
 std::vector<Eigen::Vector3d> innerBandPoints(const openvdb::FloatGrid& levelSet);
 

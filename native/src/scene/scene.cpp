@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -241,6 +242,10 @@ double Scene::surfaceSmoothing() const {
     return outputs.surfaceSmoothing > 0 ? outputs.surfaceSmoothing : kSurfaceSmoothingPerCell * cellSize();
 }
 
+bool Scene::isOpaque(size_t solid) const {
+    return std::find(transparentSolids.begin(), transparentSolids.end(), solid) == transparentSolids.end();
+}
+
 Eigen::Vector3i Scene::cellCounts() const {
     const Vec3 extent = (domain.max - domain.min) / cellSize();
     return extent.array().round().cast<int>().max(1);
@@ -272,9 +277,11 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     if (root.has("solids")) {
         const json& solids = root.raw("solids");
         if (!solids.is_array()) root.fail("solids", "must be an array");
-        for (size_t i = 0; i < solids.size(); ++i)
-            scene.solids.push_back(parseSolid(
-                FieldReader(solids[i], root.where("solids[" + std::to_string(i) + "]")), baseDir));
+        for (size_t i = 0; i < solids.size(); ++i) {
+            const FieldReader solid(solids[i], root.where("solids[" + std::to_string(i) + "]"));
+            scene.solids.push_back(parseSolid(solid, baseDir));
+            if (solid.boolean("transparent", false)) scene.transparentSolids.push_back(i);
+        }
     }
     const json& liquids = root.raw("liquids");
     if (!liquids.is_array() || liquids.empty())
@@ -406,7 +413,10 @@ struct ModelWriter {
 
 json sceneToJson(const Scene& s) {
     json solids = json::array(), liquids = json::array();
-    for (const Solid& solid : s.solids) solids.push_back(std::visit(SolidWriter{}, solid));
+    for (size_t i = 0; i < s.solids.size(); ++i) {
+        solids.push_back(std::visit(SolidWriter{}, s.solids[i]));
+        solids.back()["transparent"] = !s.isOpaque(i);
+    }
     for (const LiquidSource& liquid : s.liquids) liquids.push_back(std::visit(LiquidWriter{}, liquid));
     return {
         {"format", "viscoscope.scene"},

@@ -134,6 +134,9 @@ struct Scene {
     std::filesystem::path sourceFile;
     Domain domain;
     std::vector<Solid> solids;
+    // Indices into `solids` of those the camera sees through (a glass cup: a solid's "transparent").
+    // The others are opaque: they hide the liquid behind and inside them in simulated silhouettes.
+    std::vector<size_t> transparentSolids;
     std::vector<LiquidSource> liquids;
     Material material;
     Vec3 gravity{0, 0, -9.81};
@@ -146,6 +149,7 @@ struct Scene {
     double cellSize() const;
     Eigen::Vector3i cellCounts() const;
     double surfaceSmoothing() const;  // outputs.surfaceSmoothing, resolved
+    bool isOpaque(size_t solid) const;
 };
 
 // Parses and validates. Throws InputError("scene.json: material.viscosity: must be > 0, got -1").
