@@ -8,7 +8,7 @@ render.json (written by native/src/cli/synth_command.cpp):
     solids          OBJ of the container (world coordinates, Z up, metres) or null
     ground_height   z of the ground plane, or null for none
     clean_plate     PNG path: the scene without liquid
-    frames          [{"mesh": liquid surface OBJ, "image": PNG path}, ...]
+    frames          [{"mesh": liquid surface OBJ, "image": PNG path, "mask_image": PNG path (optional)}, ...]
     simulation_digest  which run the meshes are from (the engine compares it; unused here)
 
 An image that is already there is not rendered again: the engine keeps those a cancelled synth of
@@ -16,7 +16,10 @@ the same simulation and settings left, and removes all others first.
 
 The look is a plain studio shot: a grey backdrop, one sun, an opaque light cup, a mid-grey floor
 and honey-coloured liquid. Cycles without denoising, Standard view transform, so the noise and
-tones are those of a plain camera, not of a filmic grade. Renders the clean plate first.
+tones are those of a plain camera, not of a filmic grade. Renders the clean plate first. A frame's
+"mask_image" is the liquid alone: white and lit by nothing but itself, seen by the camera's rays only,
+before the solids and the floor left black by a black world and no sun, so that Blender's own ray
+tracing says what the camera sees of it.
 """
 
 import json
@@ -115,6 +118,33 @@ def render(scene, path):
     bpy.ops.render.render(write_still=True)
 
 
+def render_liquid(scene, frames, key, material, seen_by_camera_only=False):
+    """Renders each frame's liquid mesh with `material` into frame[key], but for images already there.
+    Seen by the camera only, it casts no light or reflection on the solids: they stay black."""
+    for frame in frames:
+        if key not in frame or os.path.exists(frame[key]):
+            continue
+        liquid = add_mesh(scene, "liquid", frame["mesh"], material)
+        if seen_by_camera_only:
+            for ray in ("diffuse", "glossy", "transmission", "volume_scatter", "shadow"):
+                setattr(liquid, "visible_" + ray, False)
+        render(scene, frame[key])
+        mesh = liquid.data
+        bpy.data.objects.remove(liquid)
+        bpy.data.meshes.remove(mesh)
+
+
+def glowing_white():
+    material = bpy.data.materials.new("liquid alone")
+    material.use_nodes = True
+    nodes = material.node_tree.nodes
+    nodes.remove(nodes["Principled BSDF"])
+    emission = nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    material.node_tree.links.new(emission.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
+    return material
+
+
 def main():
     spec_file = sys.argv[sys.argv.index("--") + 1]
     with open(spec_file, encoding="utf-8") as fh:
@@ -123,15 +153,10 @@ def main():
     # An image already there was kept by the engine from a cancelled synth of the same simulation.
     if not os.path.exists(spec["clean_plate"]):
         render(scene, spec["clean_plate"])
-    honey = principled("honey", (0.12, 0.05, 0.01), 0.6)
-    for frame in spec["frames"]:
-        if os.path.exists(frame["image"]):
-            continue
-        liquid = add_mesh(scene, "liquid", frame["mesh"], honey)
-        render(scene, frame["image"])
-        mesh = liquid.data
-        bpy.data.objects.remove(liquid)
-        bpy.data.meshes.remove(mesh)
+    render_liquid(scene, spec["frames"], "image", principled("honey", (0.12, 0.05, 0.01), 0.6))
+    bpy.data.objects.remove(bpy.data.objects["sun"])
+    scene.world.node_tree.nodes["Background"].inputs[0].default_value = (0.0, 0.0, 0.0, 1.0)
+    render_liquid(scene, spec["frames"], "mask_image", glowing_white(), seen_by_camera_only=True)
 
 
 main()

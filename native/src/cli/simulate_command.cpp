@@ -52,6 +52,10 @@ void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& 
     auto levelSet = surface::liquidLevelSet(simulation);
     if (scene.outputs.vdb) surface::writeFrameVdb(dir / frameName("frame", f, "vdb"), simulation, levelSet);
     if (scene.outputs.mesh) {
+        // The mesh is rendered (synth's reference, an artist's import): the smoothed particles' reach
+        // into walls and below the ground, which would show through a thin wall, is cut off first,
+        // as identify's silhouettes cut it.
+        surface::clipToSolidExterior(*levelSet, simulation.solids());
         std::vector<openvdb::Vec3s> points;
         std::vector<openvdb::Vec3I> triangles;
         surface::meshLevelSet(*levelSet, points, triangles);

@@ -48,6 +48,7 @@ struct SynthArguments {
     double viscosity = 0;  // 0: the scene's
     int frames = 0;       // 0: the scene's
     int samples = 8, supersample = 2;
+    bool trueMasks = false;
 };
 
 double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
@@ -170,6 +171,33 @@ cv::Mat cameraPicture(const fs::path& file, const PinholeCamera& big, cv::Size s
     return linearToSrgb(small);
 }
 
+// Blender's renders of the liquid alone, lit by nothing but itself (white) before black solids,
+// reduced to the camera's pixels as the clip is and kept where the liquid covers half a pixel or more:
+// what the camera sees of the liquid, as an `extract`-style reference in `dir` (masks/, manifest.json).
+void writeTrueMasks(const std::vector<fs::path>& renders, const PinholeCamera& big, cv::Size size, double fps,
+                    const fs::path& dir) {
+    fs::create_directories(dir / "masks");
+    ReferenceManifest manifest;
+    manifest.directory = dir;
+    manifest.source = "blender";
+    manifest.fps = fps;
+    manifest.width = size.width;
+    manifest.height = size.height;
+    manifest.parameters = {{"background", "rendered_liquid_alone"}};
+    for (size_t f = 0; f < renders.size(); ++f) {
+        cv::Mat grey;
+        cv::cvtColor(cameraPicture(renders[f], big, size), grey, cv::COLOR_BGR2GRAY);
+        const cv::Mat1b mask = srgbToLinear(grey) >= 0.5;
+        const std::string name = frameName("masks/mask", static_cast<int>(f), "png");
+        if (!cv::imwrite((dir / name).string(), mask)) throw std::runtime_error((dir / name).string() + ": cannot write");
+        manifest.frames.push_back(static_cast<int>(f));
+        manifest.times.push_back(f / fps);
+        manifest.weights.push_back(1);
+        manifest.maskFiles.push_back(name);
+    }
+    saveReferenceManifest(manifest, dir);
+}
+
 int runSynth(const SynthArguments& args) {
     openvdb::initialize();
     const auto start = Clock::now();
@@ -228,10 +256,15 @@ int runSynth(const SynthArguments& args) {
     const auto renderStart = Clock::now();
     nlohmann::json frames = nlohmann::json::array();
     std::vector<fs::path> images;
+    std::vector<fs::path> maskImages;
     for (int f = 0; f <= scene.frames; ++f) {
         images.push_back(fs::absolute(renders / frameName("frame", f, "png")));
         frames.push_back({{"mesh", fs::absolute(simulation / frameName("frame", f, "obj")).string()},
                           {"image", images.back().string()}});
+        if (args.trueMasks) {
+            maskImages.push_back(fs::absolute(renders / frameName("mask", f, "png")));
+            frames.back()["mask_image"] = maskImages.back().string();
+        }
     }
     const std::optional<double> ground = groundHeight(scene);
     const nlohmann::json spec{
@@ -256,6 +289,7 @@ int runSynth(const SynthArguments& args) {
     };
     keepIfWhole(renders / "clean_plate.png");
     for (const fs::path& image : images) keepIfWhole(image);
+    for (const fs::path& image : maskImages) keepIfWhole(image);
     if (kept > 0) progress.report({{"event", "resumed"}, {"stage", "render"}, {"kept_images", kept}});
     writeJsonFile(spec, renders / "render.json");
     size_t rendered = 0;
@@ -291,6 +325,7 @@ int runSynth(const SynthArguments& args) {
     }
     video.release();
     fs::rename(partial, dir / "reference.mp4");
+    if (args.trueMasks) writeTrueMasks(maskImages, big, size, scene.fps, dir / "true_masks");
     saveCamera(camera, dir / "camera.json");
     const double encodeSeconds = secondsSince(encodeStart);
 
@@ -308,7 +343,7 @@ int runSynth(const SynthArguments& args) {
                     {"height", big.height}, {"blender", blender.string()}}},
         {"camera", {{"file", "camera.json"}, {"width", camera.width}, {"height", camera.height}}},
         {"files", {{"video", "reference.mp4"}, {"clean_plate", "clean_plate.png"}, {"exclude", "exclude.png"},
-                   {"simulation", "simulation"}}},
+                   {"simulation", "simulation"}, {"true_masks", args.trueMasks ? nlohmann::json("true_masks") : nlohmann::json()}}},
         {"visible_liquid_px", visible},
         {"timings", {{"simulate_s", simulateSeconds}, {"render_s", renderSeconds}, {"encode_s", encodeSeconds},
                      {"total_s", secondsSince(start)}}},
@@ -348,6 +383,9 @@ Command addSynthCommand(CLI::App& app) {
     sub->add_option("--supersample", args->supersample, "Render at N × the camera's size, then average N × N blocks")
         ->check(CLI::Range(1, 8))
         ->capture_default_str();
+    sub->add_flag("--true-masks", args->trueMasks,
+                  "Also render the liquid alone into DIR/true_masks/ (an extract-style reference of what the camera "
+                  "sees of it, without extraction's errors)");
     sub->add_option("--blender", args->blender, "Blender executable (default: $VISCOSCOPE_BLENDER, else blender on PATH)");
     sub->add_option("--progress", args->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}))

@@ -123,7 +123,8 @@ ComparedRegion comparedRegion(const cv::Mat1b& compared, const SceneVisibility& 
 
 bool backgroundFromFootage(const ReferenceManifest& reference) {
     if (!reference.parameters.is_object() || !reference.parameters.contains("background")) return false;
-    return reference.parameters["background"] != "clean_plate";
+    const nlohmann::json& background = reference.parameters["background"];
+    return background == "clean_plate_frame" || background == "leading_frames";
 }
 
 double liquidOutOfViewShare(const std::vector<cv::Mat1b>& masks, const cv::Mat1b& compared,
