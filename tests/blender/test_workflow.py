@@ -28,6 +28,22 @@ def clip_path(tmp_path_factory):
     return str(path)
 
 
+
+# The sample cup's rim and base, left and right: points whose world position an artist knows.
+RIM_AND_BASE = ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05))
+
+
+def _mark_points(ctx, cam, worlds, scale=1):
+    """Camera points at `worlds`, marked where `cam` sees them (× scale); returns that camera (OpenCV)."""
+    ctx.view_layer.update()
+    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
+    for world in worlds:
+        p = ctx.scene.viscoscope.points.add()
+        p.label = "p%d" % len(ctx.scene.viscoscope.points)
+        p.world = world
+        p.image = [scale * c for c in camera_math.project(truth, world)]
+    return truth
+
 def _capture(ctx):
     container.add_cup(ctx, (0, 0, 0))
     bpy.ops.object.camera_add(location=(0, -0.45, 0.12), rotation=(math.radians(83), 0, 0))
@@ -67,13 +83,7 @@ def test_match_camera_from_points(ctx, tmp_work, fake_engine, use_engine, monkey
     """The operator writes the points, runs convert + pnp, and places the camera from R, t."""
     use_engine(fake_engine)
     cam = _capture(ctx)
-    ctx.view_layer.update()
-    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
-    vs = ctx.scene.viscoscope
-    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05), (0, 0.046, 0.114)):
-        p = vs.points.add()
-        p.world = world
-        p.image = camera_math.project(truth, world)
+    truth = _mark_points(ctx, cam, RIM_AND_BASE + ((0, 0.046, 0.114),))
     result = tmp_path / "pnp.json"
     result.write_text(json.dumps(truth))
     monkeypatch.setenv("FAKE_PNP_RESULT", str(result))
@@ -84,7 +94,7 @@ def test_match_camera_from_points(ctx, tmp_work, fake_engine, use_engine, monkey
     for i in range(4):
         for j in range(4):
             assert cam.matrix_world[i][j] == pytest.approx(expected[i][j], abs=1e-5)
-    assert vs.reprojection_error == pytest.approx(0.0, abs=1e-3)
+    assert ctx.scene.viscoscope.reprojection_error == pytest.approx(0.0, abs=1e-3)
     points = json.load(open(os.path.join(str(tmp_work), "camera", "points.json")))
     assert len(points["world"]) == 5 and points["world"][0] == pytest.approx([-0.046, 0, 0.114])
 
@@ -225,14 +235,7 @@ def test_real_engine_extract_and_overlay(ctx, tmp_work, engine_path, use_engine,
 def test_real_engine_match_camera_from_points(ctx, tmp_work, engine_path, use_engine):
     use_engine(engine_path)
     cam = _capture(ctx)
-    ctx.view_layer.update()
-    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
-    vs = ctx.scene.viscoscope
-    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05),
-                  (0, 0.046, 0.114), (0, -0.046, 0.05)):
-        p = vs.points.add()
-        p.world = world
-        p.image = camera_math.project(truth, world)
+    _mark_points(ctx, cam, RIM_AND_BASE + ((0, 0.046, 0.114), (0, -0.046, 0.05)))
     expected = cam.matrix_world.copy()
     cam.location = (0.02, -0.5, 0.2)
     cam.rotation_euler = (math.radians(70), 0.05, 0.1)
@@ -240,7 +243,7 @@ def test_real_engine_match_camera_from_points(ctx, tmp_work, engine_path, use_en
     for i in range(3):
         for j in range(4):
             assert cam.matrix_world[i][j] == pytest.approx(expected[i][j], abs=1e-3)
-    assert 0.0 <= vs.reprojection_error < 0.05
+    assert 0.0 <= ctx.scene.viscoscope.reprojection_error < 0.05
 
 
 def _plate_image(clip_path, folder):
@@ -389,14 +392,7 @@ def test_match_camera_refuses_points_outside_the_image(ctx, tmp_work):
     320 × 180 clip) are refused before any solve."""
     cam = _capture(ctx)
     ctx.scene.render.resolution_x, ctx.scene.render.resolution_y = 320, 180
-    ctx.view_layer.update()
-    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
-    vs = ctx.scene.viscoscope
-    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05)):
-        p = vs.points.add()
-        p.label = "p%d" % len(vs.points)
-        p.world = world
-        p.image = [4 * c for c in camera_math.project(truth, world)]
+    _mark_points(ctx, cam, RIM_AND_BASE, scale=4)
     before = cam.matrix_world.copy()
     with pytest.raises(RuntimeError, match=r"point 'p\d' at pixel \(\d+, \d+\) is outside the 320 × 180 image"):
         bpy.ops.viscoscope.match_camera()
@@ -408,14 +404,7 @@ def test_real_engine_match_camera_refuses_a_pose_beyond_the_clip_range(ctx, tmp_
     """A solve that puts the points beyond the camera's clip_end (Blender would not draw them) is refused."""
     use_engine(engine_path)
     cam = _capture(ctx)
-    ctx.view_layer.update()
-    truth = camera_math.opencv_camera(scene_export.camera_dict(cam, ctx.scene))
-    vs = ctx.scene.viscoscope
-    for world in ((-0.046, 0, 0.114), (0.046, 0, 0.114), (-0.046, 0, 0.05), (0.046, 0, 0.05),
-                  (0, 0.046, 0.114), (0, -0.046, 0.05)):
-        p = vs.points.add()
-        p.world = world
-        p.image = camera_math.project(truth, world)
+    _mark_points(ctx, cam, RIM_AND_BASE + ((0, 0.046, 0.114), (0, -0.046, 0.05)))
     cam.data.clip_end = 0.3  # the points are about 0.45 m away
     cam.location = (0.02, -0.5, 0.2)
     ctx.view_layer.update()

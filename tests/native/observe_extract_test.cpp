@@ -280,6 +280,49 @@ TEST(Extraction, CancelLeavesNoManifest) {
     EXPECT_THROW(extractSilhouettes(dir, options, dir / "out2"), InputError);  // image folders need --fps
 }
 
+// A frame of the footage as the clean plate draws the same masks as that frame saved as an image;
+// the first liquid, which leading background frames would learn as background, is found.
+TEST(Extraction, ACleanPlateFrameOfTheFootageIsThePlate) {
+    const TempDirectory temp("viscoscope_extract_plate_frame_test");
+    const fs::path& dir = temp.path;
+    cv::theRNG().state = 7;
+    const cv::Mat3f background = texturedBackground();
+    const fs::path frames = dir / "frames";
+    fs::create_directories(frames);
+    for (int f = 0; f < 14; ++f) {
+        const cv::Mat1b liquid = f < 2 ? cv::Mat1b(kHeight, kWidth, uchar(0)) : liquidMask(f);
+        cv::imwrite((frames / ("frame_" + std::to_string(100 + f) + ".png")).string(), renderFrame(background, liquid, f));
+    }
+    ExtractionOptions byFrame;
+    byFrame.fps = kFps;
+    byFrame.cleanPlateFrame = 1;
+    const ReferenceManifest fromFrame = extractSilhouettes(frames, byFrame, dir / "by_frame");
+    EXPECT_EQ(fromFrame.parameters.at("background"), "clean_plate_frame");
+    EXPECT_EQ(fromFrame.parameters.at("clean_plate_frame"), 1);
+    ExtractionOptions byImage = byFrame;
+    byImage.cleanPlateFrame.reset();
+    byImage.cleanPlate = frames / "frame_101.png";
+    const ReferenceManifest fromImage = extractSilhouettes(frames, byImage, dir / "by_image");
+    ASSERT_EQ(fromFrame.frames.size(), fromImage.frames.size());
+    for (size_t i = 0; i < fromFrame.frames.size(); ++i)
+        EXPECT_EQ(cv::countNonZero(fromFrame.mask(i) != fromImage.mask(i)), 0) << "frame " << i;
+    // Frames 2 … 11 hold the first liquid, which ten leading background frames take for background.
+    EXPECT_GT(silhouetteArea(fromFrame.mask(2)), 0.8 * silhouetteArea(liquidMask(2)));
+
+    ExtractionOptions both = byImage;
+    both.cleanPlateFrame = 1;
+    EXPECT_THROW(extractSilhouettes(frames, both, dir / "both"), InputError);
+    ExtractionOptions past = byFrame;
+    past.cleanPlateFrame = 14;
+    try {
+        extractSilhouettes(frames, past, dir / "past");
+        FAIL() << "a clean plate frame past the end was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("the clean plate frame 14 is not among them"), std::string::npos)
+            << e.what();
+    }
+}
+
 TEST(FrameWeights, RangesListsAndErrors) {
     const std::vector<int> frames{0, 5, 10, 15, 20};
     EXPECT_EQ(parseFrameWeights("", frames), (std::vector<double>{1, 1, 1, 1, 1}));

@@ -61,6 +61,26 @@ TEST(Scene, RoundTripsThroughJson) {
     EXPECT_EQ(sceneToJson(a), sceneToJson(b));
 }
 
+TEST(Scene, SolidsAreOpaqueUnlessMarkedTransparent) {
+    json doc = validScene();
+    EXPECT_TRUE(parseScene(doc, "scene.json").isOpaque(1));
+    doc["solids"][1]["transparent"] = true;
+    const Scene glass = parseScene(doc, "scene.json");
+    EXPECT_EQ(glass.transparentSolids, std::vector<size_t>{1});
+    EXPECT_TRUE(glass.isOpaque(0));
+    EXPECT_FALSE(glass.isOpaque(1));
+    EXPECT_EQ(sceneToJson(glass)["solids"][1]["transparent"], true);
+    EXPECT_EQ(parseScene(sceneToJson(glass), "copy.json").transparentSolids, glass.transparentSolids);
+    doc["solids"][1]["transparent"] = "yes";
+    try {
+        parseScene(doc, "scene.json");
+        FAIL() << "a non-boolean transparent was accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("scene.json.solids[1].transparent: must be true or false"),
+                  std::string::npos) << e.what();
+    }
+}
+
 TEST(Scene, BadFieldsAreNamed) {
     struct Case {
         std::string pointer;

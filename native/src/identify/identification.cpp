@@ -541,10 +541,10 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                            "longer clip)");
     }
     json doubts = doubtsBeforeSearch(obs);
-    if (options.onWarning)
+    if (options.onWarning) {
         for (const json& w : warnings) options.onWarning(w.get<std::string>());
-    if (options.onWarning)
         for (const json& d : doubts) options.onWarning(d.get<std::string>());
+    }
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const int fineRes = job.resolution, coarseRes = coarseResolution(job);
