@@ -3,8 +3,10 @@
 # draining from a cup with a hole onto the ground), from the command line.
 #   1. `synth`: simulate the scene at 64³ with another particle seed than identification uses and
 #      render it through Blender (Cycles) into a phone-like clip, out/capture_cup/synth/reference.mp4;
-#   2. `identify`: extract that clip's silhouettes like footage and search η by CMA-ES over 48³
-#      simulations within the add-on's default 10-minute budget, into out/capture_cup/identify/;
+#   2. `identify`: extract that clip's silhouettes like footage (against the rendered clean plate, no
+#      mask of the cup: the opaque cup hides what it hides in the simulated silhouettes too) and search
+#      η by CMA-ES over 60³ simulations (the grid the cup's hole needs, as the add-on raises it to)
+#      within the add-on's default 10-minute budget, into out/capture_cup/identify/;
 #   3. print η* with its interval against the truth.
 # About 13 minutes on 2 cores after the build (3 for the clip, 10 for the search). Ctrl-C stops it
 # with its work kept; running it again resumes both steps where they stopped. Extra arguments go to
@@ -18,7 +20,8 @@ mkdir -p "$out"
 build/bin/viscoscope synth sample_scenes/capture_cup.json --camera sample_scenes/capture_camera.json \
   --out "$out/synth"
 
-# The add-on's defaults (Identify panel): start at 5 Pa·s, spread ×3, two grid placements in turn.
+# The add-on's defaults (Identify panel): start at 5 Pa·s, spread ×3, two grid placements in turn, the
+# grid raised to 60.
 # Paths are relative to the job file.
 cat > "$out/job.json" <<'JOB'
 {
@@ -28,7 +31,7 @@ cat > "$out/job.json" <<'JOB'
   "video": "synth/reference.mp4",
   "extraction": {"clean_plate": "synth/clean_plate.png", "weights": "0:0"},
   "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.001, "max": 10000}],
-  "resolution": 48,
+  "resolution": 60,
   "grid_placements": 2,
   "time_budget_s": 600,
   "seed": 3

@@ -105,6 +105,8 @@ def start_simulation(window, area):
     window.event_simulate(type='MOUSEMOVE', value='NOTHING', x=x, y=y)
     for _ in range(15):
         window.event_simulate(type='WHEELDOWNMOUSE', value='PRESS', x=x, y=y)
+    # Then out of the sidebar, so that no tooltip covers it in the screenshots.
+    window.event_simulate(type='MOUSEMOVE', value='NOTHING', x=area.x + area.width // 4, y=area.y + area.height // 2)
     sim["t0"] = sim["last"] = time.monotonic()
     sim["max_gap"] = 0.0
     sim["progress_seen"] = []
