@@ -99,7 +99,6 @@ class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
             row.operator("preferences.addon_show", text="", icon='PREFERENCES').module = prefs.ADDON_ID
         layout.operator("viscoscope.load_video", icon='FILE_MOVIE')
         if vs.clip:
-            col = layout.column(align=True)
             draw_message(layout, context, "%s · %d × %d px · %d frames · %.3g fps" % (
                 vs.clip.name, vs.clip.size[0], vs.clip.size[1], vs.clip.frame_duration, vs.clip.fps))
         draw_labelled(layout, vs, "work_dir")
