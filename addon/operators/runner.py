@@ -58,8 +58,8 @@ def describe_progress(event):
         parts.append("best E %.4g" % float(event["best_E"]))
     if "time" in event and "best_eta" not in event:
         parts.append("t %.3g s" % float(event["time"]))
-    if "eta" in event:
-        parts.append("%s left" % engine.format_seconds(event["eta"]))
+    if "remaining_s" in event:
+        parts.append("%s left" % engine.format_seconds(event["remaining_s"]))
     return " · ".join(parts) or "Running…"
 
 

@@ -128,7 +128,7 @@ if sys.argv[1] == "identify":
         if cancelled:
             json.dump({"generation": g}, open(ckpt, "w")); sys.exit(3)
         print(json.dumps({"event": "progress", "generation": g + 1, "generations": gens, "best_eta": 7.9 + 1.0 / (g + 1),
-                          "best_E": 0.1 / (g + 1), "elapsed": g * sleep, "eta": (gens - g) * sleep}), flush=True)
+                          "best_E": 0.1 / (g + 1), "elapsed": g * sleep, "remaining_s": (gens - g) * sleep}), flush=True)
         time.sleep(sleep)
     json.dump({"viscosity": {"value": 7.9, "interval": [7.5, 8.3]}}, open(os.path.join(out, "result.json"), "w"))
     write_png(os.path.join(out, "convergence.png"))
@@ -142,7 +142,7 @@ for f in range(frames):
         os.kill(os.getpid(), signal.SIGSEGV)
     print("not json noise")
     print(json.dumps({"event": "progress", "frame": f + 1, "frames": frames, "step": f, "time": f / 30,
-                      "elapsed": 0.1 * f, "eta": 0.1 * (frames - f)}), flush=True)
+                      "elapsed": 0.1 * f, "remaining_s": 0.1 * (frames - f)}), flush=True)
     time.sleep(sleep)
 print(json.dumps({"event": "done", "frames": frames}), flush=True)
 '''

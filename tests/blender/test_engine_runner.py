@@ -175,7 +175,7 @@ def test_real_engine_simulate_progress_and_cancel(ctx, tmp_work, engine_path):
     assert _wait_for(lambda: job.poll() and job.last_progress is not None or job.finished, 120)
     assert not job.finished, job.message()
     progress = job.last_progress
-    for key in ("frame", "frames", "time", "elapsed", "eta"):
+    for key in ("frame", "frames", "time", "elapsed", "remaining_s"):
         assert key in progress
     assert "step" in progress or "steps" in progress  # the contract says "step"; the engine writes "steps"
     job.cancel()
@@ -246,7 +246,7 @@ def test_real_engine_cancel_through_the_operator_runner(ctx, tmp_work, engine_pa
 
 def test_progress_line_names_the_coarse_phase():
     event = {"event": "progress", "stage": "identify", "generation": 3, "generations": 40, "fidelity": "coarse",
-             "best_eta": 9.4627, "best_E": 0.0261, "eta": 364.2}
+             "best_eta": 9.4627, "best_E": 0.0261, "remaining_s": 364.2}
     line = runner.describe_progress(event)
     assert line.startswith("Generation 3/40 (coarse) · best η 9.463 Pa·s · best E 0.0261 · ")
     event["fidelity"] = "full"

@@ -287,7 +287,7 @@ TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {
         const json event = json::parse(line);
         if (event.at("event") != "progress") continue;
         ++progressLines;
-        for (const char* key : {"generation", "generations", "evaluations", "best_eta", "best_E", "sigma", "elapsed", "eta"})
+        for (const char* key : {"generation", "generations", "evaluations", "best_eta", "best_E", "sigma", "elapsed", "remaining_s"})
             EXPECT_TRUE(event.contains(key)) << key << " missing in " << line;
     }
     EXPECT_EQ(progressLines, 3);

@@ -69,7 +69,7 @@ int runIdentify(const IdentifyArguments& args) {
         nlohmann::json event{{"event", "progress"},      {"stage", "identify"},         {"generation", r.generation},
                              {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},
                              {"fidelity", r.coarse ? "coarse" : "full"},
-                             {"sigma", r.sigma},         {"elapsed", r.elapsed},         {"eta", r.remaining}};
+                             {"sigma", r.sigma},         {"elapsed", r.elapsed},         {"remaining_s", r.remaining}};
         if (!r.bestTheta.empty()) {
             nlohmann::json theta = nlohmann::json::object();
             for (size_t i = 0; i < job.parameters.size(); ++i) {

@@ -214,7 +214,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
         progress.report({{"event", "progress"}, {"stage", "simulate"}, {"frame", stats.frame}, {"frames", scene.frames},
                          {"time", stats.simulatedTime}, {"steps", stats.steps},
                          {"iterations", stats.solverIterations}, {"volume", stats.liquidVolume},
-                         {"elapsed", elapsed}, {"eta", elapsed / (f + 1 - firstFrame) * (scene.frames - f - 1)}});
+                         {"elapsed", elapsed}, {"remaining_s", elapsed / (f + 1 - firstFrame) * (scene.frames - f - 1)}});
         if (f + 1 == scene.frames) break;  // complete, even if cancelled just now
         if (g_cancelRequested || std::chrono::duration<double>(Clock::now() - lastSave).count() >= kResumeSaveInterval) {
             saveResumeState(dir, record, wallSeconds(), simulation);
