@@ -393,7 +393,7 @@ TEST(Physics, PowerLawFilmMatchesItsProfile) {
     const double K = 3.4, n = 0.5, h = kFilmDepth;
     const json material = {{"density", 1000},
                            {"viscosity", 1.0},
-                           {"model", {{"type", "power_law"}, {"consistency", K}, {"index", n}}}};
+                           {"model", {{"type", "power_law"}, {"consistency", K}, {"flow_index", n}}}};
     const double a = std::pow(kFilmDrive / K, 1 / n) * n / (n + 1), p = (n + 1) / n;
     const double error = filmProfileError(
         material, 16, [&](double z) { return a * (std::pow(h, p) - std::pow(h - z, p)); }, "power law n=0.5");
@@ -810,7 +810,7 @@ TEST(Physics, DamBreakFrontMatchesMeasuredSyrup) {
                      {"periodic", {false, true, false}}};
     doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {lock, 0.011, depth}}});
     doc["material"] = {{"density", 1540}, {"viscosity", 9.712},
-                       {"model", {{"type", "power_law"}, {"consistency", 9.712}, {"index", 0.979}}}};
+                       {"model", {{"type", "power_law"}, {"consistency", 9.712}, {"flow_index", 0.979}}}};
     doc["fps"] = 4;
     sim::Simulation s(parseScene(doc, "dambreak"));
     double errorSq = 0, normSq = 0;

@@ -184,17 +184,17 @@ MaterialModel parseModel(const FieldReader& r) {
     const std::string type = r.string("type");
     if (type == "newtonian") return Newtonian{};
     if (type == "power_law") {
-        PowerLaw m{r.positive("consistency"), r.positive("index"), r.positive("eta_min", 1e-3),
+        PowerLaw m{r.positive("consistency"), r.positive("flow_index"), r.positive("eta_min", 1e-3),
                    r.positive("eta_max", 1e4)};
         if (m.etaMin >= m.etaMax) r.fail("eta_max", "must be greater than eta_min");
         return m;
     }
     if (type == "carreau")
         return Carreau{r.nonNegative("eta_infinity", 0.0), r.positive("relaxation_time"),
-                       r.positive("index")};
+                       r.positive("flow_index")};
     if (type == "herschel_bulkley")
         return HerschelBulkley{r.nonNegative("yield_stress", 0.0), r.positive("consistency"),
-                               r.positive("index"), r.positive("eta_max", 1e4)};
+                               r.positive("flow_index"), r.positive("eta_max", 1e4)};
     r.fail("type", "unknown material model '" + type +
                        "' (newtonian, power_law, carreau, herschel_bulkley)");
 }
@@ -397,16 +397,16 @@ struct LiquidWriter {
 struct ModelWriter {
     json operator()(const Newtonian&) const { return {{"type", "newtonian"}}; }
     json operator()(const PowerLaw& m) const {
-        return {{"type", "power_law"}, {"consistency", m.consistency}, {"index", m.index},
+        return {{"type", "power_law"}, {"consistency", m.consistency}, {"flow_index", m.index},
                 {"eta_min", m.etaMin}, {"eta_max", m.etaMax}};
     }
     json operator()(const Carreau& m) const {
         return {{"type", "carreau"}, {"eta_infinity", m.etaInfinity},
-                {"relaxation_time", m.relaxationTime}, {"index", m.index}};
+                {"relaxation_time", m.relaxationTime}, {"flow_index", m.index}};
     }
     json operator()(const HerschelBulkley& m) const {
         return {{"type", "herschel_bulkley"}, {"yield_stress", m.yieldStress},
-                {"consistency", m.consistency}, {"index", m.index}, {"eta_max", m.etaMax}};
+                {"consistency", m.consistency}, {"flow_index", m.index}, {"eta_max", m.etaMax}};
     }
 };
 }  // namespace
