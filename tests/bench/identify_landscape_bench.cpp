@@ -70,7 +70,7 @@ int main(int argc, char** argv) {
             if (ev.trackError) trackErrors[k] = *ev.trackError;
             for (size_t f = 0; f < ev.frameE.size(); ++f) silhouettes[k] += observation.reference.weights[f] * ev.frameE[f];
         });
-        const bool inverse = job.parameters.front().name == "viscosity";
+        const bool inverse = job.parameters.front().profileInInverse();
         const auto printTable = [&](const char* title, const std::vector<double>& values) {
             std::printf("%s\n%10s", title, "θ \\ shift");
             for (double s : shifts) std::printf(" %9.3f", s);

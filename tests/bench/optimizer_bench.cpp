@@ -288,7 +288,7 @@ int main(int argc, char** argv) {
         c.budget = budget;
         c.threads = threads;
         const auto& parameters = c.job.parameters;
-        while (c.viscosity < parameters.size() && parameters[c.viscosity].name != "viscosity") ++c.viscosity;
+        while (c.viscosity < parameters.size() && parameters[c.viscosity].name() != "viscosity") ++c.viscosity;
         if (c.viscosity == parameters.size())
             throw InputError(jobFile.string() + ": parameters: no \"viscosity\" to compare with --truth");
         identify::CmaEsSettings settings;

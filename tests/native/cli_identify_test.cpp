@@ -184,7 +184,7 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         std::string text = job().dump();
         const std::string initial = "\"initial\":5.0";
         text.replace(text.find(initial), initial.size(), "\"initial\":1e999");
-        expectBadInput(writeJobText(text, "infinite.json"), "non-finite");
+        expectBadInput(writeJobText(text, "infinite.json"), "a number past double's range");
         std::string nan = job().dump();
         nan.replace(nan.find("\"spread\":5.0"), 12, "\"spread\":NaN");
         expectBadInput(writeJobText(nan, "nan.json"), "not valid JSON");
@@ -267,9 +267,47 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
     {  // extraction options: a misspelt name, a clean plate that is not there
         json doc = job();
         doc["extraction"] = {{"treshold", 100}};
-        expectBadInput(writeJob(doc, "typo.json"), "extraction.treshold: unknown extraction option");
+        expectBadInput(writeJob(doc, "typo.json"), "extraction.treshold: unknown field; did you mean `threshold`?");
         doc["extraction"] = {{"clean_plate", "plate.png"}};
         expectBadInput(writeJob(doc, "plate.json"), "extraction.clean_plate");
+    }
+    {  // misspelt keys are refused, never run with their defaults; so are a repeated key and trailing text
+        json doc = job();
+        doc["max_generation"] = 3;
+        expectBadInput(writeJob(doc, "misspelt.json"), "max_generation: unknown field; did you mean `max_generations`?");
+        doc = job();
+        doc["parameters"][0]["maximum"] = 100.0;
+        expectBadInput(writeJob(doc, "misspelt_bound.json"), "parameters[0].maximum: unknown field");
+        doc = job();
+        doc["fidelity"]["coarse_generation"] = 1;
+        expectBadInput(writeJob(doc, "misspelt_fidelity.json"), "did you mean `coarse_generations`?");
+        const std::string text = job().dump();
+        expectBadInput(writeJobText(text.substr(0, text.size() - 1) + ",\"seed\":5}", "repeated.json"),
+                       "the key \"seed\" appears twice");
+        expectBadInput(writeJobText(text + "\n{}", "trailing.json"), "not valid JSON");
+        std::string deep = job().dump();
+        deep.insert(deep.size() - 1, ",\"deep\":" + std::string(100000, '[') + std::string(100000, ']'));
+        expectBadInput(writeJobText(deep, "deep.json"), "nested deeper than 64 levels");
+    }
+    {  // parameters: undeclared, not held by the scene's material model, searched outside its physical
+       // bounds; a fixed value outside them, or fixed and searched at once
+        json doc = job();
+        doc["parameters"][0]["name"] = "viscosty";
+        expectBadInput(writeJob(doc, "undeclared.json"), "\"viscosty\" is not a declared parameter; did you mean \"viscosity\"?");
+        doc["parameters"][0] = {{"name", "flow_index"}};
+        expectBadInput(writeJob(doc, "newtonian_n.json"), "the scene's material model is newtonian, and only power_law or carreau or herschel_bulkley has it");
+        doc["parameters"][0] = {{"name", "viscosity"}, {"min", 1e-3}, {"max", 1e12}};
+        expectBadInput(writeJob(doc, "physical.json"), "parameters[0].max: must be in [1e-06, 1e+09] Pa·s, got 1e+12");
+        doc = job();
+        doc["fixed"] = {{{"name", "density"}, {"value", 1e300}}};
+        expectBadInput(writeJob(doc, "fixed_bounds.json"), "fixed[0].value: must be in [100, 25000] kg/m³");
+        doc["fixed"] = {{{"name", "viscosity"}, {"value", 8.0}}};
+        expectBadInput(writeJob(doc, "fixed_twice.json"), "\"viscosity\" is searched or fixed twice");
+        doc["fixed"] = {{{"name", "surface_tension"}, {"value", 0.07}, {"uncertainty", -0.01}}};
+        expectBadInput(writeJob(doc, "fixed_uncertainty.json"), "fixed[0].uncertainty: must be ≥ 0");
+        doc["fixed"] = json::array();
+        doc["parameters"][0] = {{"name", "solids[0].hole_radius"}};
+        expectBadInput(writeJob(doc, "not_a_cup.json"), "solids[0] is not a cup");
     }
 }
 

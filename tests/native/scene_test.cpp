@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <sstream>
+
 using namespace viscoscope;
 using nlohmann::json;
 
@@ -88,8 +90,8 @@ TEST(Scene, BadFieldsAreNamed) {
         std::string expected;
     };
     const std::vector<Case> cases{
-        {"/material/viscosity", -1.0, "scene.json.material.viscosity: must be > 0"},
-        {"/material/density", 0.0, "scene.json.material.density: must be > 0"},
+        {"/material/viscosity", -1.0, "scene.json.material.viscosity: must be in [1e-06, 1e+09] Pa·s, got -1"},
+        {"/material/density", 1e300, "scene.json.material.density: must be in [100, 25000] kg/m³, got 1e+300"},
         {"/material/viscosity", "thick", "scene.json.material.viscosity: must be a number"},
         {"/solids/1/hole_radius", 0.05, "scene.json.solids[1].hole_radius: must be smaller than inner_radius"},
         {"/domain/resolution", 2, "scene.json.domain.resolution: must be in [4, 1024]"},
@@ -101,6 +103,15 @@ TEST(Scene, BadFieldsAreNamed) {
         {"/solids/0/type", "sphere", "scene.json.solids[0].type: unknown solid type 'sphere'"},
         {"/output/surface_smoothing", -0.001, "scene.json.output.surface_smoothing: must be > 0"},
         {"/output/surface_smoothing", 0.03, "scene.json.output.surface_smoothing: must be below 4 cells"},
+        {"/solids/1/inner_radius", 1e300, "scene.json.solids[1].inner_radius: must be in [0.0001, 10] m"},
+        {"/material/surface_tension", 1e6, "scene.json.material.surface_tension: must be in [0, 1] N/m"},
+        {"/material/surface_tenson", 0.07, "scene.json.material.surface_tenson: unknown field; did you mean `surface_tension`?"},
+        {"/solids/1/hole_radus", 0.005, "scene.json.solids[1].hole_radus: unknown field; did you mean `hole_radius`?"},
+        {"/frame", 10, "scene.json.frame: unknown field; did you mean `frames`?"},
+        {"/solver/toleranse", 1e-5, "scene.json.solver.toleranse: unknown field; did you mean `tolerance`?"},
+        {"/material/model", json{{"type", "power_law"}, {"consistency", 3}, {"index", 0.5}}, "scene.json.material.model.flow_index: missing"},
+        {"/material/model", json{{"type", "power_law"}, {"consistency", 3}, {"flow_index", 0.5}, {"colour", 1}},
+         "scene.json.material.model.colour: unknown field"},
     };
     for (const Case& c : cases) {
         json doc = validScene();
@@ -136,4 +147,70 @@ TEST(Scene, WarnsWhenACupHoleSpansTooFewCells) {
     doc["domain"]["resolution"] = 16;
     doc["solids"][1]["hole_radius"] = 0;
     EXPECT_TRUE(resolutionWarnings(parseScene(doc, "scene.json")).empty());
+}
+
+// What a file says twice, after its end or too deep is refused, not read as its last or first part.
+TEST(Scene, StrictJsonRefusesRepeatedKeysTrailingTextAndDeepNesting) {
+    const auto errorOfText = [](const std::string& text) {
+        std::istringstream in(text);
+        try {
+            parseJsonStrictly(in, "scene.json");
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string();
+    };
+    EXPECT_EQ(errorOfText(R"({"a": {"b": 1, "c": 2}, "d": [1, {"b": 3}]})"), "");
+    EXPECT_EQ(errorOfText(R"({"a": {"b": 1, "b": 2}})"), "scene.json: the key \"b\" appears twice in one object");
+    EXPECT_NE(errorOfText(R"({"a": 1} {"a": 2})").find("scene.json: not valid JSON"), std::string::npos);
+    EXPECT_NE(errorOfText(R"({"a": 1e309})").find("scene.json: a number past double's range"), std::string::npos);
+    EXPECT_EQ(errorOfText(std::string(100000, '[') + std::string(100000, ']')),
+              "scene.json: nested deeper than 64 levels");
+}
+
+// Each parameter is declared once; a job reaches any of them in the scene by name.
+TEST(Scene, DeclaredParametersResolveSetAndRefuseWhatTheSceneCannotHold) {
+    Scene scene = parseScene(validScene(), "scene.json");
+    const SceneParameter eta = resolveParameter(scene, "viscosity", "job");
+    EXPECT_DOUBLE_EQ(parameterValue(scene, eta), 8);
+    setParameter(scene, eta, 3.5);
+    EXPECT_DOUBLE_EQ(scene.material.viscosity, 3.5);
+    EXPECT_THROW(setParameter(scene, eta, -1), InputError);
+    const SceneParameter hole = resolveParameter(scene, "solids[1].hole_radius", "job");
+    setParameter(scene, hole, 0.004);
+    EXPECT_DOUBLE_EQ(std::get<CupSolid>(scene.solids[1]).holeRadius, 0.004);
+    const auto messageOf = [&](const std::string& name) {
+        try {
+            resolveParameter(scene, name, "job");
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string();
+    };
+    EXPECT_EQ(messageOf("flow_index"), "job: \"flow_index\": the scene's material model is newtonian, and only "
+                                        "power_law or carreau or herschel_bulkley has it");
+    EXPECT_EQ(messageOf("solids[0].hole_radius"), "job: \"solids[0].hole_radius\": solids[0] is not a cup");
+    EXPECT_EQ(messageOf("solids[7].hole_radius"), "job: \"solids[7].hole_radius\": the scene has 2 solids");
+    EXPECT_EQ(messageOf("hole_radius"), "job: \"hole_radius\" is a cup's: name it \"solids[i].hole_radius\", i its "
+                                         "solid's index");
+    EXPECT_EQ(messageOf("solids[1].viscosity"), "job: \"solids[1].viscosity\" is not a declared parameter; did you "
+                                                 "mean \"viscosity\"? (viscoscope schema lists them)");
+    json powerLaw = validScene();
+    powerLaw["material"]["model"] = {{"type", "power_law"}, {"consistency", 4.0}, {"flow_index", 0.6}};
+    scene = parseScene(powerLaw, "scene.json");
+    const SceneParameter n = resolveParameter(scene, "flow_index", "job");
+    setParameter(scene, n, 0.5);
+    EXPECT_DOUBLE_EQ(std::get<PowerLaw>(scene.material.model).index, 0.5);
+    EXPECT_THROW(resolveParameter(scene, "yield_stress", "job"), InputError);
+    // The schema lists every declaration, each with its unit and bounds, and a scene that writes them
+    // reads back through the same declarations.
+    const json schema = parameterSchema();
+    ASSERT_EQ(schema.at("parameters").size(), parameterDeclarations().size());
+    for (const json& p : schema.at("parameters")) {
+        EXPECT_FALSE(p.at("unit").get<std::string>().empty()) << p;
+        EXPECT_LE(p.at("lower").get<double>(), p.at("upper").get<double>()) << p;
+        if (p.at("searchable").get<bool>() && !p.at("search").at("lower").is_null())
+            EXPECT_GE(p.at("search").at("lower").get<double>(), p.at("lower").get<double>()) << p;
+    }
+    EXPECT_EQ(parseScene(sceneToJson(scene), "round trip").material.model.index(), scene.material.model.index());
 }

@@ -244,6 +244,8 @@ PinholeCamera parseCamera(const nlohmann::json& doc, const std::string& origin) 
         }
     }
     in.requireFormat("viscoscope.camera");
+    rejectUnknownKeys(doc, {"format", "version", "width", "height", "K", "distortion", "R", "t", "reprojection_error_px"},
+                      origin + ": ");
     PinholeCamera camera;
     camera.width = in.positiveInt("width");
     camera.height = in.positiveInt("height");
@@ -259,6 +261,11 @@ PinholeCamera parseCamera(const nlohmann::json& doc, const std::string& origin) 
 BlenderCameraParams parseBlenderCamera(const nlohmann::json& doc, const std::string& origin) {
     const JsonReader in{doc, origin};
     in.requireFormat("viscoscope.blender_camera");
+    rejectUnknownKeys(doc,
+                      {"format", "version", "lens_mm", "sensor_width_mm", "sensor_height_mm", "sensor_fit", "shift_x",
+                       "shift_y", "resolution_x", "resolution_y", "resolution_percentage", "pixel_aspect_x",
+                       "pixel_aspect_y", "matrix_world"},
+                      origin + ": ");
     BlenderCameraParams b;
     b.lensMm = in.number("lens_mm");
     b.sensorWidthMm = in.number("sensor_width_mm");
@@ -292,13 +299,7 @@ nlohmann::json blenderCameraToJson(const BlenderCameraParams& b) {
 PinholeCamera loadCamera(const std::filesystem::path& file) {
     std::ifstream stream(file);
     if (!stream) throw InputError(file.string() + ": cannot open camera file");
-    nlohmann::json doc;
-    try {
-        doc = nlohmann::json::parse(stream);
-    } catch (const nlohmann::json::parse_error& e) {
-        throw InputError(file.string() + ": not valid JSON (" + std::string(e.what()) + ")");
-    }
-    return parseCamera(doc, file.string());
+    return parseCamera(parseJsonStrictly(stream, file.string()), file.string());
 }
 
 nlohmann::json cameraToJson(const PinholeCamera& camera) {

@@ -29,5 +29,6 @@ Command addCameraCommand(CLI::App& app);
 Command addIdentifyCommand(CLI::App& app);
 Command addSynthCommand(CLI::App& app);
 Command addCompareCommand(CLI::App& app);
+Command addSchemaCommand(CLI::App& app);
 
 }  // namespace viscoscope::cli

@@ -73,8 +73,8 @@ int runIdentify(const IdentifyArguments& args) {
         if (!r.bestTheta.empty()) {
             nlohmann::json theta = nlohmann::json::object();
             for (size_t i = 0; i < job.parameters.size(); ++i) {
-                theta[job.parameters[i].name] = r.bestTheta[i];
-                if (job.parameters[i].name == "viscosity") event["best_eta"] = r.bestTheta[i];
+                theta[job.parameters[i].name()] = r.bestTheta[i];
+                if (job.parameters[i].name() == "viscosity") event["best_eta"] = r.bestTheta[i];
             }
             event["best_theta"] = theta;
         }

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
         cli::addIdentifyCommand(app),
         cli::addSynthCommand(app),
         cli::addCompareCommand(app),
+        cli::addSchemaCommand(app),
     };
 
     try {

@@ -268,10 +268,7 @@ Observation firstPartOf(const Observation& observation, double share) {
 
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution, double gridShift) {
     Scene scene = job.scene;
-    for (size_t i = 0; i < job.parameters.size(); ++i) {
-        if (job.parameters[i].name == "viscosity") scene.material.viscosity = theta.at(i);
-        else if (job.parameters[i].name == "surface_tension") scene.material.surfaceTension = theta.at(i);
-    }
+    for (size_t i = 0; i < job.parameters.size(); ++i) setParameter(scene, job.parameters[i].parameter, theta.at(i));
     scene.domain.resolution = resolution;
     const double shift = gridShift * scene.cellSize();
     for (int a = 0; a < 2; ++a) {
@@ -315,6 +312,11 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     std::vector<double> trackSimulated, trackMeasured;
     const double trackGround = ground ? *ground : scene.domain.min.z();
     const bool silhouettes = hasSilhouettes(obs);
+    // A searched cup's walls move with θ, and with them what they hide.
+    std::optional<SceneVisibility> searchedView;
+    if (silhouettes && std::any_of(job.parameters.begin(), job.parameters.end(),
+                                   [](const ParameterSpec& p) { return p.parameter.solid >= 0; }))
+        searchedView = sceneVisibility(scene, job.camera);
     for (int frame = 0; frame <= lastFrame; ++frame) {
         const auto simStart = Clock::now();
         if (frame > 0) simulation.advanceFrame();
@@ -360,9 +362,10 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
         }
         if (compared && silhouettes) {
             surface::clipToSolidExterior(*levelSet, simulation.solids());
+            const SceneVisibility& view = searchedView ? *searchedView : obs.view;
             const cv::Mat1b silhouette = job.exactSilhouettes
-                                             ? silhouetteFromLevelSet(*levelSet, job.camera, &obs.view)
-                                             : silhouetteFromLevelSetFast(*levelSet, job.camera, &obs.view);
+                                             ? silhouetteFromLevelSet(*levelSet, job.camera, &view)
+                                             : silhouetteFromLevelSetFast(*levelSet, job.camera, &view);
             for (size_t i = 0; i < count; ++i) {
                 if (obs.simFrames[i] != frame) continue;
                 ev.frameE[i] = frameObjective(silhouette, obs.masks[i], obs.compared, job.silhouetteComparison);

@@ -486,7 +486,7 @@ json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const Ident
                        const json& evaluated) {
     json doubts = json::array();
     for (size_t i = 0; i < job.parameters.size(); ++i) {
-        const std::string& name = job.parameters[i].name;
+        const std::string& name = job.parameters[i].name();
         const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
         for (const double bound : {lower, upper})
             if (std::abs(std::log(result.interval[i][bound == lower ? 0 : 1] / bound)) < 1e-6) {
@@ -511,7 +511,7 @@ json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const Ident
         if (thetaHigh[i] >= kFlatSpan * thetaLow[i] && most - least < kFlatObjectiveShare * least) {
             std::ostringstream line;
             line << "E is nearly flat: it changes by " << std::setprecision(2) << 100 * (most - least) / least
-                 << " % over " << job.parameters[i].name << " from " << std::setprecision(4) << thetaLow[i] << " to "
+                 << " % over " << job.parameters[i].name() << " from " << std::setprecision(4) << thetaLow[i] << " to "
                  << thetaHigh[i] << ", so the footage hardly tells these apart (check the camera, the masks and "
                                     "what the clip shows)";
             doubts.push_back(line.str());
@@ -613,7 +613,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         for (const json& e : evaluated)
             if (e.at("fidelity") == kFull && !e.at("E").is_null())
                 points.push_back({e.at("theta")[0].get<double>(), e.at("E").get<double>(), e.value("grid_shift", 0.0)});
-        if (byGeneration) return placementMeanProfile(points, job.parameters[0].name == "viscosity");
+        if (byGeneration) return placementMeanProfile(points, job.parameters[0].profileInInverse());
         std::vector<std::pair<double, double>> plain;
         for (const PlacedPoint& p : points) plain.emplace_back(p.theta, p.E);
         return plain;
@@ -676,7 +676,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // ±7 % and the best was 31.45 (4.8 %); with the proposals, 30.36 (1.2 %), itself a proposal.
     auto parabolicProposal = [&]() -> std::optional<Eigen::VectorXd> {
         const std::vector<std::pair<double, double>> points = fullFidelityPoints();
-        const std::optional<double> vertex = bracketedVertex(points, job.parameters[0].name == "viscosity");
+        const std::optional<double> vertex = bracketedVertex(points, job.parameters[0].profileInInverse());
         if (!vertex) return std::nullopt;
         for (const auto& p : points)
             if (std::abs(std::log(*vertex / p.first)) < kProposalSpacing) return std::nullopt;
@@ -905,14 +905,15 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         // space, the spread it still considers plausible; not a statistical confidence interval).
         const std::array<double, 2> cma{std::exp(clipped(es.mean()[i] - 2 * sd[i], bounds.lower[i], bounds.upper[i])),
                                         std::exp(clipped(es.mean()[i] + 2 * sd[i], bounds.lower[i], bounds.upper[i]))};
-        json entry{{"best_evaluation", bestTheta},
+        json entry{{"unit", job.parameters[i].parameter.declaration->unit},
+                   {"best_evaluation", bestTheta},
                    {"cma_mean", std::exp(es.mean()[i])},
                    {"cma_interval", cma},
                    {"log_std", sd[i]}};
         std::optional<ProfileFit> profile;
         if (n == 1) {
             json info;
-            profile = fitProfile(fullFidelityPoints(), bestTheta, 0.5, job.parameters[i].name == "viscosity", info);
+            profile = fitProfile(fullFidelityPoints(), bestTheta, 0.5, job.parameters[i].profileInInverse(), info);
             // A vertex beyond the fitted points is an extrapolation, and so is its band (measured: a
             // vertex at 5.1 over points up to 2.87 gave [2.82, 7.7] for a truth of 3).
             if (profile && !profile->vertexAmongPoints) profile.reset();
@@ -966,7 +967,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 check["E"] = alignmentScores.at("E");
                 const std::optional<double> shifted =
                     std::isfinite(E[0]) && std::isfinite(E[1])
-                        ? shiftedMinimum(*profile, job.parameters[i].name == "viscosity", thetas, E)
+                        ? shiftedMinimum(*profile, job.parameters[i].profileInInverse(), thetas, E)
                         : std::nullopt;
                 if (shifted) {
                     check["theta_min"] = std::isfinite(*shifted) ? json(*shifted) : json("infinite");
@@ -996,7 +997,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         entry["interval_method"] = method;
         result.interval.push_back(band);
         if (i == 0) result.intervalMethod = std::string(profile ? "profile" : "cma") + (alignmentSpread ? "+alignment" : "");
-        params[job.parameters[i].name] = entry;
+        params[job.parameters[i].name()] = entry;
     }
     const double elapsed = elapsedBefore + std::chrono::duration<double>(Clock::now() - sessionStart).count();
     double evalSeconds = 0;
@@ -1022,10 +1023,15 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         doubts.push_back(d);
     }
     for (const json& d : doubts) warnings.push_back(d);
+    json fixedParameters = json::object();
+    for (const FixedParameter& f : job.fixed)
+        fixedParameters[f.parameter.name] = {
+            {"value", f.value}, {"uncertainty", f.uncertainty}, {"unit", f.parameter.declaration->unit}};
     json doc{{"format", "viscoscope.identify_result"},
              {"version", 1},
              {"job", job.file.string()},
              {"parameters", params},
+             {"fixed", fixedParameters},
              {"E", result.E},
              {"stop", toString(result.stop)},
              {"generations", result.generations},
@@ -1084,7 +1090,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     {
         std::ofstream csv(outDir / "evaluations.csv.partial");
         csv << "generation,fidelity,resolution,frames";
-        for (const ParameterSpec& p : job.parameters) csv << "," << p.name;
+        for (const ParameterSpec& p : job.parameters) csv << "," << p.name();
         csv << ",E,seconds,origin\n";
         csv << std::setprecision(17);
         for (const json& e : evaluated) {

@@ -99,11 +99,22 @@ private:
 // ---------------------------------------------------------------------------------------------
 // The job file (format "viscoscope.job", version 1), as addon/operators/identify.py writes it.
 
+// A searched parameter: any declared one the scene holds (scene.h, parameterDeclarations), its
+// bounds and start within the declaration's unless the job gives them.
 struct ParameterSpec {
-    std::string name;       // "viscosity" (material.viscosity) or "surface_tension"
+    SceneParameter parameter;
     double initial = 10;    // θ0 (SI)
     double spread = 10;     // initial spread in θ units, converted to log space: σ0 = ln(1 + spread/θ0)
     double lower = 1e-3, upper = 1e4;
+    const std::string& name() const { return parameter.name; }
+    // E's profile is fitted in 1/θ (fitProfile's `inverse`) when flow speeds scale as 1/θ.
+    bool profileInInverse() const { return parameter.declaration->speedScalesInversely; }
+};
+// A parameter held at an independently measured value (a viscometer's reading) with its standard
+// uncertainty, so that what the fit leaves is explained at the known value: the job's "fixed".
+struct FixedParameter {
+    SceneParameter parameter;
+    double value = 0, uncertainty = 0;
 };
 
 struct FidelitySchedule {
@@ -179,6 +190,7 @@ struct Job {
     double timeOffset = 0;  // simulation time of reference time 0 (s)
     int lastSourceFrame = 1000000;  // frame_end − frame_start: later reference frames are ignored
     std::vector<ParameterSpec> parameters;
+    std::vector<FixedParameter> fixed;  // already set in `scene`
     int resolution = 32;
     int maxGenerations = 80;
     std::uint64_t seed = 1;

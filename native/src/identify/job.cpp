@@ -80,6 +80,7 @@ Eigen::Vector3d finiteVector(const nlohmann::json& doc, const std::string& key, 
 // {"csv", "column", "observable": "front" | "radius", "origin", "direction" (front), "band", "weight"}
 MeasuredTrack parseMeasuredTrack(const nlohmann::json& track, const std::string& where, const fs::path& baseDir) {
     MeasuredTrack m;
+    rejectUnknownKeys(track, {"csv", "column", "observable", "origin", "direction", "band", "weight"}, where + ".");
     m.csv = resolve(baseDir, track.at("csv").get<std::string>());
     if (!fs::exists(m.csv)) throw InputError(where + ".csv: " + m.csv.string() + " not found");
     const std::string observable = optionalString(track, "observable", where).value_or("");
@@ -105,22 +106,38 @@ MeasuredTrack parseMeasuredTrack(const nlohmann::json& track, const std::string&
     return m;
 }
 
-ParameterSpec parseParameter(const nlohmann::json& p, const std::string& where) {
+SceneParameter namedParameter(const nlohmann::json& p, const Scene& scene, const std::string& where) {
     if (!p.is_object()) throw InputError(where + ": must be an object");
-    ParameterSpec spec;
     const auto name = optionalString(p, "name", where);
     if (!name) throw InputError(where + ".name: missing");
-    spec.name = *name;
-    if (spec.name != "viscosity" && spec.name != "surface_tension")
-        throw InputError(where + ".name: \"" + spec.name + "\" is not supported (viscosity, surface_tension)");
-    const double defaultInitial = spec.name == "viscosity" ? 10.0 : 0.05;
-    spec.initial = optionalNumber(p, "initial", defaultInitial, where);
+    return resolveParameter(scene, *name, where + ".name");
+}
+
+void requireWithinDeclaredBounds(const SceneParameter& parameter, double value, const std::string& where) {
+    if (const std::string problem = boundsProblem(*parameter.declaration, value); !problem.empty())
+        throw InputError(where + ": " + problem + " (" + parameter.name + "'s physical bounds)");
+}
+
+// Bounds and start default to the declaration's; a cup's dimensions to its value in the scene, and
+// a factor 2 either side of it.
+ParameterSpec parseParameter(const nlohmann::json& p, const Scene& scene, const std::string& where) {
+    ParameterSpec spec;
+    spec.parameter = namedParameter(p, scene, where);
+    rejectUnknownKeys(p, {"name", "initial", "spread", "min", "max", "lower", "upper", "log"}, where + ".");
+    const ParameterDeclaration& d = *spec.parameter.declaration;
+    if (!d.searchable) throw InputError(where + ".name: \"" + spec.name() + "\" cannot be searched; fix it instead");
+    const double sceneValue = parameterValue(scene, spec.parameter);
+    spec.initial = optionalNumber(p, "initial", std::isnan(d.searchInitial) ? sceneValue : d.searchInitial, where);
     spec.spread = optionalNumber(p, "spread", spec.initial, where);
-    spec.lower = bound(p, "min", "lower", spec.name == "viscosity" ? 1e-3 : 1e-4, where);
-    spec.upper = bound(p, "max", "upper", spec.name == "viscosity" ? 1e4 : 1.0, where);
+    spec.lower = bound(p, "min", "lower", std::isnan(d.searchLower) ? sceneValue / 2 : d.searchLower, where);
+    spec.upper = bound(p, "max", "upper", std::isnan(d.searchUpper) ? sceneValue * 2 : d.searchUpper, where);
     if (p.contains("log") && p.at("log") != nlohmann::json(true))
         throw InputError(where + ".log: only log-space search is supported (log: true)");
-    if (spec.lower <= 0) throw InputError(where + ".min: must be > 0 (the search is in log space), got " + num(spec.lower));
+    if (spec.lower <= 0)
+        throw InputError(where + ".min: must be > 0 (the search is in log space), got " + num(spec.lower) +
+                         (sceneValue == 0 ? " (the scene's value is 0: give min and max)" : ""));
+    requireWithinDeclaredBounds(spec.parameter, spec.lower, where + ".min");
+    requireWithinDeclaredBounds(spec.parameter, spec.upper, where + ".max");
     if (spec.lower > spec.upper)
         throw InputError(where + ": bounds: lower " + num(spec.lower) + " > upper " + num(spec.upper));
     if (spec.initial < spec.lower || spec.initial > spec.upper)
@@ -128,6 +145,18 @@ ParameterSpec parseParameter(const nlohmann::json& p, const std::string& where) 
                          num(spec.lower) + ", " + num(spec.upper) + "]");
     if (spec.spread <= 0) throw InputError(where + ".spread: must be > 0");
     return spec;
+}
+
+// {"name", "value", "uncertainty"}: the standard uncertainty (same unit), 0 when not known.
+FixedParameter parseFixed(const nlohmann::json& p, const Scene& scene, const std::string& where) {
+    FixedParameter fixed;
+    fixed.parameter = namedParameter(p, scene, where);
+    rejectUnknownKeys(p, {"name", "value", "uncertainty"}, where + ".");
+    fixed.value = finiteNumber(p, "value", where);
+    requireWithinDeclaredBounds(fixed.parameter, fixed.value, where + ".value");
+    fixed.uncertainty = optionalNumber(p, "uncertainty", 0.0, where);
+    if (!(fixed.uncertainty >= 0)) throw InputError(where + ".uncertainty: must be ≥ 0, got " + num(fixed.uncertainty));
+    return fixed;
 }
 
 }  // namespace
@@ -142,6 +171,13 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": format: expected \"viscoscope.job\"");
     if (doc.value("version", nlohmann::json()) != nlohmann::json(1))
         throw InputError(origin + ": version: expected 1, got " + doc.value("version", nlohmann::json()).dump());
+    rejectUnknownKeys(doc,
+                      {"format", "version", "scene", "camera", "silhouettes", "reference", "video", "extraction",
+                       "track", "area_track_weight", "ground_band", "frame_start", "frame_end", "max_frames",
+                       "time_offset_s", "parameters", "fixed", "resolution", "max_generations", "seed", "population",
+                       "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method", "alignment_check",
+                       "grid_placements", "grid_placement_schedule", "silhouette_comparison", "fidelity"},
+                      origin + ": ");
     Job job;
     job.document = doc;
 
@@ -191,6 +227,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             if (track.contains("observable")) {
                 job.measuredTrack = parseMeasuredTrack(track, where, baseDir);
             } else {
+                rejectUnknownKeys(track, {"csv", "weight"}, where + ".");
                 job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
                 job.trackWeight = optionalNumber(track, "weight", 1.0, where);
                 if (job.trackWeight < 0) throw InputError(where + ".weight: must be ≥ 0");
@@ -218,10 +255,21 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": parameters: must be a non-empty array");
     std::set<std::string> names;
     for (size_t i = 0; i < doc.at("parameters").size(); ++i) {
-        ParameterSpec spec = parseParameter(doc.at("parameters").at(i), origin + ": parameters[" + std::to_string(i) + "]");
-        if (!names.insert(spec.name).second)
-            throw InputError(origin + ": parameters[" + std::to_string(i) + "].name: \"" + spec.name + "\" twice");
+        const std::string where = origin + ": parameters[" + std::to_string(i) + "]";
+        ParameterSpec spec = parseParameter(doc.at("parameters").at(i), job.scene, where);
+        if (!names.insert(spec.name()).second) throw InputError(where + ".name: \"" + spec.name() + "\" twice");
         job.parameters.push_back(spec);
+    }
+    if (given("fixed")) {
+        if (!doc.at("fixed").is_array()) throw InputError(origin + ": fixed: must be an array");
+        for (size_t i = 0; i < doc.at("fixed").size(); ++i) {
+            const std::string where = origin + ": fixed[" + std::to_string(i) + "]";
+            FixedParameter fixed = parseFixed(doc.at("fixed").at(i), job.scene, where);
+            if (!names.insert(fixed.parameter.name).second)
+                throw InputError(where + ".name: \"" + fixed.parameter.name + "\" is searched or fixed twice");
+            setParameter(job.scene, fixed.parameter, fixed.value);
+            job.fixed.push_back(fixed);
+        }
     }
 
     job.resolution = optionalInt(doc, "resolution", job.scene.domain.resolution, 4, origin);
@@ -274,6 +322,8 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         const nlohmann::json& f = doc.at("fidelity");
         const std::string where = origin + ": fidelity";
         if (!f.is_object()) throw InputError(where + ": must be an object");
+        rejectUnknownKeys(f, {"coarse_factor", "coarse_time_share", "coarse_generations", "min_fine_generations"},
+                          where + ".");
         job.fidelity.coarseFactor = optionalNumber(f, "coarse_factor", job.fidelity.coarseFactor, where);
         if (job.fidelity.coarseFactor <= 0 || job.fidelity.coarseFactor > 1)
             throw InputError(where + ".coarse_factor: must be in (0, 1]");
@@ -297,14 +347,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
 Job loadJob(const fs::path& file) {
     std::ifstream stream(file);
     if (!stream) throw InputError(file.string() + ": cannot open the job file");
-    nlohmann::json doc;
-    try {
-        doc = nlohmann::json::parse(stream);
-    } catch (const nlohmann::json::out_of_range& e) {
-        throw InputError(file.string() + ": a non-finite number (" + std::string(e.what()) + ")");
-    } catch (const nlohmann::json::exception& e) {
-        throw InputError(file.string() + ": not valid JSON (" + std::string(e.what()) + ")");
-    }
+    const nlohmann::json doc = parseJsonStrictly(stream, file.string());
     Job job;
     try {
         job = parseJob(doc, file.string(), file.parent_path());

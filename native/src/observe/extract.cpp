@@ -419,9 +419,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
         "exclude_polygons",
         "weights", "mog2_variance_threshold", "mog2_minimum_variance", "mog2_shadow_threshold", "compensate_gain",
         "threshold", "edge_coverage", "close_kernel_px", "open_kernel_px", "min_blob_px"};
-    for (const auto& [name, value] : doc.items())
-        if (std::find(known.begin(), known.end(), name) == known.end())
-            throw InputError(origin + "." + name + ": unknown extraction option");
+    rejectUnknownKeys(doc, known, origin + ".");
     const OptionReader in{doc, origin};
     ExtractionOptions o;
     o.first = in.integer("first", o.first);

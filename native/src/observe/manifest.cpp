@@ -118,12 +118,7 @@ ReferenceManifest loadReferenceManifest(const fs::path& directory) {
     const std::string origin = file.string();
     std::ifstream stream(file);
     if (!stream) throw InputError(origin + ": missing (run `viscoscope extract` first)");
-    nlohmann::json doc;
-    try {
-        doc = nlohmann::json::parse(stream);
-    } catch (const nlohmann::json::parse_error& e) {
-        throw InputError(origin + ": not valid JSON (" + std::string(e.what()) + ")");
-    }
+    const nlohmann::json doc = parseJsonStrictly(stream, origin);
     if (!doc.is_object() || doc.value("format", nlohmann::json()) != nlohmann::json("viscoscope.reference"))
         throw InputError(origin + ": format: expected \"viscoscope.reference\"");
     ReferenceManifest manifest;

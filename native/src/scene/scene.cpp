@@ -25,11 +25,16 @@ public:
         throw InputError(path_ + (field.empty() ? "" : "." + field) + ": " + problem);
     }
     std::string where(const std::string& field) const { return path_ + "." + field; }
-    bool has(const std::string& field) const { return object_.contains(field); }
+    bool has(const std::string& field) const {
+        asked_.push_back(field);
+        return object_.contains(field);
+    }
     const json& raw(const std::string& field) const {
         if (!has(field)) fail(field, "missing");
         return object_.at(field);
     }
+    // Refuses the fields nothing asked for: a misspelt key would otherwise leave its default in use.
+    void finish() const { rejectUnknownKeys(object_, asked_, path_ + "."); }
 
     double number(const std::string& field) const {
         const json& v = raw(field);
@@ -40,6 +45,17 @@ public:
     }
     double number(const std::string& field, double fallback) const {
         return has(field) ? number(field) : fallback;
+    }
+    // A declared parameter (parameterDeclarations), within its bounds; its default when absent.
+    double parameter(const char* name) const {
+        const ParameterDeclaration& d = *findParameterDeclaration(name);
+        if (!has(name)) {
+            if (std::isnan(d.defaultValue)) fail(name, "missing");
+            return d.defaultValue;
+        }
+        const double x = number(name);
+        if (const std::string problem = boundsProblem(d, x); !problem.empty()) fail(name, problem);
+        return x;
     }
     double positive(const std::string& field) const {
         const double x = number(field);
@@ -101,6 +117,7 @@ public:
 private:
     const json& object_;
     std::string path_;
+    mutable std::vector<std::string> asked_;
 };
 
 void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
@@ -118,11 +135,11 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
     if (type == "cup") {
         CupSolid cup;
         cup.position = r.vec3("position");
-        cup.innerRadius = r.positive("inner_radius");
-        cup.height = r.positive("height");
-        cup.wallThickness = r.positive("wall_thickness");
-        cup.bottomThickness = r.positive("bottom_thickness");
-        cup.holeRadius = r.nonNegative("hole_radius", 0.0);
+        cup.innerRadius = r.parameter("inner_radius");
+        cup.height = r.parameter("height");
+        cup.wallThickness = r.parameter("wall_thickness");
+        cup.bottomThickness = r.parameter("bottom_thickness");
+        cup.holeRadius = r.parameter("hole_radius");
         if (cup.holeRadius >= cup.innerRadius)
             r.fail("hole_radius", "must be smaller than inner_radius (" +
                                       FieldReader::format(cup.innerRadius) + "), got " +
@@ -184,24 +201,23 @@ MaterialModel parseModel(const FieldReader& r) {
     const std::string type = r.string("type");
     if (type == "newtonian") return Newtonian{};
     if (type == "power_law") {
-        PowerLaw m{r.positive("consistency"), r.positive("flow_index"), r.positive("eta_min", 1e-3),
-                   r.positive("eta_max", 1e4)};
+        PowerLaw m{r.parameter("consistency"), r.parameter("flow_index"), r.parameter("eta_min"),
+                   r.parameter("eta_max")};
         if (m.etaMin >= m.etaMax) r.fail("eta_max", "must be greater than eta_min");
         return m;
     }
     if (type == "carreau")
-        return Carreau{r.nonNegative("eta_infinity", 0.0), r.positive("relaxation_time"),
-                       r.positive("flow_index")};
+        return Carreau{r.parameter("eta_infinity"), r.parameter("relaxation_time"), r.parameter("flow_index")};
     if (type == "herschel_bulkley")
-        return HerschelBulkley{r.nonNegative("yield_stress", 0.0), r.positive("consistency"),
-                               r.positive("flow_index"), r.positive("eta_max", 1e4)};
+        return HerschelBulkley{r.parameter("yield_stress"), r.parameter("consistency"), r.parameter("flow_index"),
+                               r.parameter("eta_max")};
     r.fail("type", "unknown material model '" + type +
                        "' (newtonian, power_law, carreau, herschel_bulkley)");
 }
 
 }  // namespace
 
-// Measured on the sample scene (18 mm hole, η = 8 Pa·s, 2 s, seed 1): the cup drained 46.4 cm³
+// kMinHoleCells: measured on the sample scene (18 mm hole, η = 8 Pa·s, 2 s, seed 1): the cup drained 46.4 cm³
 // with the hole 3.2 cells across (32³), 63.5 at 3.6, 44.3 at 4.0, 38.3 at 4.8 and 39.9 at 6.4.
 // (Before faces passed flux through their open area only: 60.0, 68.9, 43.8, 39.7 and 40.0. With
 // CFL 2 instead of 1: 46.5, 63.7, 44.3, 38.3 and 39.9.) Above the threshold the drain still depends
@@ -214,7 +230,6 @@ MaterialModel parseModel(const FieldReader& r) {
 // (3.2–6.4 cells), against 0.224, 0.352, 0.251, 0.204 and 0.214 with the faces alone: 36³ drains
 // 5 % less than 64³, 32³ 6 % more (tests/bench/drain_alignment.py --resolutions 32,36,40,48,64
 // --shifts 0 --viscosity 8 --frames 60 --seed 1).
-constexpr double kMinHoleCells = 4.5;
 
 std::vector<std::string> resolutionWarnings(const Scene& scene) {
     std::vector<std::string> warnings;
@@ -273,6 +288,7 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
             domain.fail("periodic", "must be an array of 3 booleans");
         for (int i = 0; i < 3; ++i) scene.domain.periodic[i] = p[i].get<bool>();
     }
+    domain.finish();
 
     if (root.has("solids")) {
         const json& solids = root.raw("solids");
@@ -281,22 +297,29 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
             const FieldReader solid(solids[i], root.where("solids[" + std::to_string(i) + "]"));
             scene.solids.push_back(parseSolid(solid, baseDir));
             if (solid.boolean("transparent", false)) scene.transparentSolids.push_back(i);
+            solid.finish();
         }
     }
     const json& liquids = root.raw("liquids");
     if (!liquids.is_array() || liquids.empty())
         root.fail("liquids", "must be a non-empty array: the scene has no liquid");
-    for (size_t i = 0; i < liquids.size(); ++i)
-        scene.liquids.push_back(parseLiquid(
-            FieldReader(liquids[i], root.where("liquids[" + std::to_string(i) + "]")),
-            scene.solids));
+    for (size_t i = 0; i < liquids.size(); ++i) {
+        const FieldReader liquid(liquids[i], root.where("liquids[" + std::to_string(i) + "]"));
+        scene.liquids.push_back(parseLiquid(liquid, scene.solids));
+        liquid.finish();
+    }
 
     const FieldReader material = root.child("material");
-    scene.material.density = material.positive("density");
-    scene.material.viscosity = material.positive("viscosity");
-    scene.material.surfaceTension = material.nonNegative("surface_tension", 0.0);
-    scene.material.slipLength = material.nonNegative("slip_length", 0.0);
-    if (material.has("model")) scene.material.model = parseModel(material.child("model"));
+    scene.material.density = material.parameter("density");
+    scene.material.viscosity = material.parameter("viscosity");
+    scene.material.surfaceTension = material.parameter("surface_tension");
+    scene.material.slipLength = material.parameter("slip_length");
+    if (material.has("model")) {
+        const FieldReader model = material.child("model");
+        scene.material.model = parseModel(model);
+        model.finish();
+    }
+    material.finish();
 
     scene.gravity = root.vec3("gravity", scene.gravity);
     scene.fps = root.positive("fps", 30.0);
@@ -327,6 +350,7 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
             else if (model == "grid") scene.solver.holeConductance = HoleConductance::Grid;
             else s.fail("hole_conductance", "must be \"dagan\" or \"grid\", got '" + model + "'");
         }
+        s.finish();
     }
     if (root.has("output")) {
         const FieldReader o = root.child("output");
@@ -339,20 +363,17 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
                 o.fail("surface_smoothing", "must be below 4 cells (" + FieldReader::format(4 * scene.cellSize()) +
                                                 " m), got " + FieldReader::format(scene.outputs.surfaceSmoothing));
         }
+        o.finish();
     }
     scene.outputs.surfaceSmoothing = scene.surfaceSmoothing();
+    root.finish();
     return scene;
 }
 
 Scene loadScene(const std::filesystem::path& file) {
     std::ifstream in(file);
     if (!in) throw InputError(file.string() + ": cannot open scene file");
-    json doc;
-    try {
-        in >> doc;
-    } catch (const json::parse_error& e) {
-        throw InputError(file.string() + ": not valid JSON (" + e.what() + ")");
-    }
+    const json doc = parseJsonStrictly(in, file.string());
     Scene scene = parseScene(doc, file.filename().string(), file.parent_path());
     scene.sourceFile = file;
     return scene;

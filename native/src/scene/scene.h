@@ -8,6 +8,7 @@
 
 #include <array>
 #include <filesystem>
+#include <iosfwd>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -152,6 +153,71 @@ struct Scene {
     bool isOpaque(size_t solid) const;
 };
 
+// ---------------------------------------------------------------------------------------------
+// The physical and geometric parameters, each declared once: the scene reader checks its fields
+// against these bounds, a job searches or fixes any of them by name, `viscoscope schema` prints them
+// and the add-on reads that (addon/engine.py).
+
+enum class ParameterHome {
+    Material,       // material.NAME
+    MaterialModel,  // material.model.NAME, for the models in `models`
+    Cup,            // solids[i].NAME of a cup; a job names it "solids[i].NAME"
+};
+
+struct ParameterDeclaration {
+    const char* name;    // the scene file's key, and the job's name for it
+    const char* symbol;  // as the panel shows it
+    const char* unit;    // SI
+    const char* description;
+    ParameterHome home;
+    std::vector<const char*> models;  // MaterialModel: the model types that hold it
+    double defaultValue;              // NaN: required
+    double lower, upper;              // physical bounds, inclusive: the readers refuse values outside
+    bool searchable;                  // a job may search it (in ln θ: searchLower > 0)
+    double searchLower, searchUpper;  // a job's search bounds when it gives none
+    double searchInitial;             // θ0 when the job gives none; NaN: the scene's value
+    // Flow speeds scale as 1/θ (η, K): identify fits E's profile in 1/θ rather than ln θ.
+    bool speedScalesInversely;
+};
+
+const std::vector<ParameterDeclaration>& parameterDeclarations();
+// The declaration named `name`; nullptr if none.
+const ParameterDeclaration* findParameterDeclaration(const std::string& name);
+// `viscoscope schema`: every declaration, and the file formats' versions.
+nlohmann::json parameterSchema();
+
+// One parameter of one scene: a material's ("viscosity"), its model's ("flow_index") or a solid's
+// ("solids[1].hole_radius").
+struct SceneParameter {
+    std::string name;  // as a job names it
+    const ParameterDeclaration* declaration = nullptr;
+    int solid = -1;    // Cup: the index into Scene::solids
+};
+// Resolves a job's parameter name against a scene; throws InputError (prefixed by `where`) when no
+// declaration has that name or the scene cannot hold it (a Newtonian scene and "flow_index").
+SceneParameter resolveParameter(const Scene& scene, const std::string& name, const std::string& where);
+double parameterValue(const Scene& scene, const SceneParameter& parameter);
+// Sets it; throws InputError when `value` lies outside the declared bounds.
+void setParameter(Scene& scene, const SceneParameter& parameter, double value);
+// "must be in [lower, upper] UNIT, got VALUE", or empty when `value` lies within the bounds.
+std::string boundsProblem(const ParameterDeclaration& declaration, double value);
+
+// ---------------------------------------------------------------------------------------------
+// Reading the engine's JSON files strictly.
+
+// Parses one JSON document from `text`: trailing text, a key given twice in one object and nesting
+// deeper than kMaxJsonDepth are refused with InputError("ORIGIN: ..."), as is invalid JSON or a
+// number past double's range.
+constexpr int kMaxJsonDepth = 64;
+nlohmann::json parseJsonStrictly(std::istream& text, const std::string& origin);
+// The known name closest to `given` by edit distance, when it is close enough to be a misspelling
+// (at most a third of its letters, and 3, differ); empty otherwise.
+std::string nearestName(const std::string& given, const std::vector<std::string>& known);
+// Throws InputError("PREFIXKEY: unknown field; did you mean `K`?") for the first key of `object`
+// not in `known` (prefix "scene.json.material." or "job.json: "). Forward compatibility goes
+// through a file's "version".
+void rejectUnknownKeys(const nlohmann::json& object, const std::vector<std::string>& known, const std::string& prefix);
+
 // Parses and validates. Throws InputError("scene.json: material.viscosity: must be > 0, got -1").
 Scene parseScene(const nlohmann::json& doc, const std::string& origin,
                  const std::filesystem::path& baseDir = {});
@@ -161,6 +227,8 @@ Scene loadRecordedScene(const std::filesystem::path& record);
 // Valid settings that will give wrong physics, one line each naming the solid and the fix: a cup's
 // hole spanning fewer cells than the drain rate needs.
 std::vector<std::string> resolutionWarnings(const Scene& scene);
+// The cells across a cup's hole its drain rate needs (the measurements are in scene.cpp).
+inline constexpr double kMinHoleCells = 4.5;
 nlohmann::json sceneToJson(const Scene& scene);
 // The first ground plane's height, if the scene has one.
 std::optional<double> groundHeight(const Scene& scene);
