@@ -17,7 +17,7 @@ from bl_ui.utils import PresetPanel
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
 FLUID_FIELDS = ("description", "viscosity", "density", "surface_tension", "slip_length", "model",
-                "flow_index", "eta_infinity", "relaxation_time", "yield_stress", "color", "roughness",
+                "consistency", "flow_index", "eta_infinity", "relaxation_time", "yield_stress", "color", "roughness",
                 "transmission")
 
 

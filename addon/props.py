@@ -8,7 +8,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        FloatVectorProperty, IntProperty, PointerProperty, StringProperty)
 
-from . import mantaflow
+from . import mantaflow, schema
 
 ROLE_ITEMS = [
     ('NONE', "None", "Not part of a Viscoscope scene"),
@@ -22,9 +22,9 @@ ROLE_ITEMS = [
 
 MODEL_ITEMS = [
     ('NEWTONIAN', "Newtonian", "Constant viscosity η"),
-    ('POWER_LAW', "Power law", "η(γ̇) = η · γ̇^(n-1)"),
+    ('POWER_LAW', "Power law", "η(γ̇) = K γ̇^(n-1)"),
     ('CARREAU', "Carreau", "η(γ̇) = η∞ + (η - η∞)(1 + (λγ̇)²)^((n-1)/2)"),
-    ('HERSCHEL_BULKLEY', "Herschel–Bulkley", "Yield stress τ0 with a power-law flow above it"),
+    ('HERSCHEL_BULKLEY', "Herschel–Bulkley", "η(γ̇) = (τ_y + K γ̇^n)/γ̇: a yield stress τ_y with a power-law flow above it"),
 ]
 
 # The job's grid_placement_schedule.
@@ -61,19 +61,19 @@ class ViscoscopeObjectSettings(bpy.types.PropertyGroup):
 
 
 class ViscoscopeFluid(bpy.types.PropertyGroup):
-    """The fluid material: what a preset stores."""
+    """The fluid material: what a preset stores. Names, units, bounds and defaults are the engine's
+    declarations (schema.py); the defaults of required ones are a honey's."""
     description: StringProperty(name="Description", default="")
-    viscosity: FloatProperty(name="η (Pa·s)", description="Dynamic viscosity, Pa·s",
-                             default=8.0, min=0.0, soft_max=1000.0, precision=4)
-    density: FloatProperty(name="ρ (kg/m³)", description="Density, kg/m³", default=1400.0, min=1e-3, soft_max=20000.0)
-    surface_tension: FloatProperty(name="σ (N/m)", description="Surface tension, N/m", default=0.0, min=0.0, precision=4)
-    slip_length: FloatProperty(name="Slip Length (m)", description="Wall slip length, metres",
-                               default=0.0, min=0.0, precision=5)
+    viscosity: FloatProperty(**schema.float_property_args("viscosity", 8.0), soft_max=1000.0, precision=4)
+    density: FloatProperty(**schema.float_property_args("density", 1400.0))
+    surface_tension: FloatProperty(**schema.float_property_args("surface_tension", 0.0), precision=4)
+    slip_length: FloatProperty(**schema.float_property_args("slip_length", 0.0), precision=5)
     model: EnumProperty(name="Model", items=MODEL_ITEMS, default='NEWTONIAN')
-    flow_index: FloatProperty(name="Flow Index n", default=1.0, min=1e-3, max=5.0)
-    eta_infinity: FloatProperty(name="η∞ (Pa·s)", description="Carreau infinite-shear viscosity, Pa·s", default=0.0, min=0.0)
-    relaxation_time: FloatProperty(name="λ (s)", description="Carreau time constant, s", default=1.0, min=0.0)
-    yield_stress: FloatProperty(name="τ0 (Pa)", description="Yield stress, Pa", default=0.0, min=0.0)
+    consistency: FloatProperty(**schema.float_property_args("consistency", 8.0), soft_max=1000.0, precision=4)
+    flow_index: FloatProperty(**schema.float_property_args("flow_index", 1.0))
+    eta_infinity: FloatProperty(**schema.float_property_args("eta_infinity", 0.0), precision=4)
+    relaxation_time: FloatProperty(**schema.float_property_args("relaxation_time", 1.0))
+    yield_stress: FloatProperty(**schema.float_property_args("yield_stress", 0.0))
     color: FloatVectorProperty(name="Colour", subtype='COLOR', size=3, min=0.0, max=1.0,
                                default=(0.8, 0.45, 0.05))
     roughness: FloatProperty(name="Roughness", default=0.05, min=0.0, max=1.0)

@@ -10,7 +10,7 @@ import os
 
 import bpy
 
-from . import units
+from . import schema, units
 
 SCENE_FORMAT = "viscoscope.scene"
 SCENE_VERSION = 1
@@ -57,6 +57,16 @@ def _field(name, value, minimum=None, positive=False):
         return _clean(units.check_finite(name, value, minimum=minimum, strictly_positive=positive))
     except units.UnitError as exc:
         raise ExportError(str(exc)) from exc
+
+
+def _declared(name, value):
+    """A material parameter, checked against the engine's declared bounds before the engine sees it."""
+    value = _field("material " + name, value)
+    lower, upper = schema.bounds(name)
+    if not lower <= value <= upper:
+        raise ExportError("material %s: %g %s is outside [%g, %g]"
+                          % (name, value, schema.PARAMETERS[name]["unit"], lower, upper))
+    return value
 
 
 def _uniform_scale(obj):
@@ -113,18 +123,15 @@ def _safe_filename(name):
 
 def material_dict(fluid):
     model = {"type": MODEL_TYPES[fluid.model]}
-    if fluid.model in ('POWER_LAW', 'CARREAU', 'HERSCHEL_BULKLEY'):
-        model["flow_index"] = _field("material flow_index", fluid.flow_index, positive=True)
-    if fluid.model == 'CARREAU':
-        model["eta_infinity"] = _field("material eta_infinity", fluid.eta_infinity, minimum=0.0)
-        model["relaxation_time"] = _field("material relaxation_time", fluid.relaxation_time, minimum=0.0)
-    if fluid.model == 'HERSCHEL_BULKLEY':
-        model["yield_stress"] = _field("material yield_stress", fluid.yield_stress, minimum=0.0)
-    return {"density": _field("material density", fluid.density, positive=True),
-            "viscosity": _field("material viscosity", fluid.viscosity, minimum=0.0),
-            "surface_tension": _field("material surface_tension", fluid.surface_tension, minimum=0.0),
-            "slip_length": _field("material slip_length", fluid.slip_length, minimum=0.0),
-            "model": model}
+    # Each model's parameters as the engine declares them (schema.py), minus the regularization caps
+    # the panel does not show (eta_min, eta_max keep the engine's defaults).
+    for name, declaration in schema.PARAMETERS.items():
+        if declaration["home"] == "material.model" and model["type"] in declaration["types"] and hasattr(fluid, name):
+            model[name] = _declared(name, getattr(fluid, name))
+    material = {name: _declared(name, getattr(fluid, name))
+                for name in ("density", "viscosity", "surface_tension", "slip_length")}
+    material["model"] = model
+    return material
 
 
 def build_scene(scene, scene_dir, objects=None, depsgraph=None):

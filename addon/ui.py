@@ -256,6 +256,8 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
         layout.prop(fluid, "model")
         if fluid.model != 'NEWTONIAN':
             col = layout.column(align=True)
+            if fluid.model in ('POWER_LAW', 'HERSCHEL_BULKLEY'):
+                col.prop(fluid, "consistency")
             col.prop(fluid, "flow_index")
             if fluid.model == 'CARREAU':
                 col.prop(fluid, "eta_infinity")

@@ -7,7 +7,7 @@ import os
 
 import bpy
 
-from .. import engine, prefs, scene_export
+from .. import engine, prefs, scene_export, schema
 from .runner import EngineOperator, is_running
 from .silhouettes import extraction_settings, reference_video
 
@@ -16,10 +16,10 @@ JOB_VERSION = 1
 
 
 # The viscosity search's bounds (Pa·s): written into the job and used to flag an interval that reaches them.
-ETA_BOUNDS = (1e-3, 1e4)
-# The engine wants a cup's hole at least this many cells across (native/src/scene/scene.cpp,
-# kMinHoleCells): coarser, the cup drains at the wrong rate and η comes out wrong with it.
-MIN_HOLE_CELLS = 4.5
+ETA_BOUNDS = schema.search_bounds("viscosity")
+# The engine wants a cup's hole at least this many cells across: coarser, the cup drains at the wrong
+# rate and η comes out wrong with it.
+MIN_HOLE_CELLS = schema.MIN_HOLE_CELLS
 
 
 def identify_dir(scene):

@@ -15,7 +15,12 @@ power-law fit K = 9.712 Pa·sⁿ, n = 0.979; see that folder's README).
 4. `identify_landscape_bench` at the viscometer's readings and around η*: E and the front's error,
    on the job's grid and moved half a cell.
 
+With `--unknown channel_width` the viscosity is instead fixed at the viscometer's (the mean of its
+readings, half their spread as the uncertainty: the job's "fixed"), and the width of the channel,
+side walls of a "channel" solid inside a domain `--max-width` wide, is what the front identifies.
+
     /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
+    /usr/bin/python3 tests/bench/measured_dambreak.py --unknown channel_width [--max-width 0.3]
 """
 import argparse
 import json
@@ -38,7 +43,11 @@ def main():
     parser.add_argument("--generations", type=int, default=30)
     parser.add_argument("--channel-width", type=float, help="m between side walls (default: none, periodic)")
     parser.add_argument("--work", help="folder for the scene, job and results (default: a temporary one)")
+    parser.add_argument("--unknown", choices=("viscosity", "channel_width"), default="viscosity")
+    parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
     args = parser.parse_args()
+    if args.unknown == "channel_width":
+        return identify_channel_width(args)
     data = pathlib.Path(args.data).resolve()
     if not data.is_file():
         sys.exit(f"measured data not found: {data}")
@@ -84,6 +93,45 @@ def main():
     if landscape.returncode != 0:
         sys.exit(f"identify_landscape_bench failed: {landscape.stderr.strip()}")
     print(landscape.stdout, end="")
+
+
+def identify_channel_width(args):
+    """The channel's width from the filmed front, with η held at the viscometer's."""
+    data = pathlib.Path(args.data).resolve()
+    work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_width_"))
+    work.mkdir(parents=True, exist_ok=True)
+    lock, depth, length = 0.2, 0.0443, 0.55
+    dx = length / args.resolution
+    half = args.max_width / 2 + 2 * dx  # the widest walls searched stay inside the domain
+    scene = {"format": "viscoscope.scene", "version": 1,
+             "domain": {"min": [0, -half, 0], "max": [length, half, 0.055], "resolution": args.resolution},
+             "solids": [{"type": "channel", "center_y": 0, "width": 0.1}],
+             "liquids": [{"type": "box", "min": [0, -half, 0], "max": [lock, half, depth]}],
+             "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
+             "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
+    (work / "scene.json").write_text(json.dumps(scene, indent=1))
+    eta, uncertainty = sum(VISCOMETER) / 2, (VISCOMETER[1] - VISCOMETER[0]) / 2
+    job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
+           "track": {"csv": str(data), "column": "front_m", "observable": "front",
+                     "origin": [lock, 0, 0], "direction": [1, 0, 0], "band": 0.0065},
+           "fixed": [{"name": "viscosity", "value": eta, "uncertainty": uncertainty}],
+           "parameters": [{"name": "solids[0].width", "initial": 0.1, "spread": 0.05, "min": 0.04,
+                           "max": args.max_width}],
+           "max_generations": args.generations, "seed": 3}
+    (work / "job.json").write_text(json.dumps(job, indent=1))
+    started = time.monotonic()
+    identify = subprocess.run([args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress",
+                               "none", "--no-fields"], capture_output=True, text=True)
+    wall = time.monotonic() - started
+    if identify.returncode != 0:
+        sys.exit(f"identify failed (exit {identify.returncode}): {identify.stderr.strip()}")
+    result = json.loads((work / "identify/result.json").read_text())
+    width = result["parameters"]["solids[0].width"]
+    best = [e for e in result["evaluated"] if e["fidelity"] == "full" and e["theta"][0] == width["value"]][0]
+    print(f"dam break, {args.resolution} cells along the channel, η fixed at {eta:.4g} ± {uncertainty:.2g} Pa·s")
+    print(f"identified channel width W* = {100 * width['value']:.2f} cm, interval "
+          f"[{100 * width['interval'][0]:.2f}, {100 * width['interval'][1]:.2f}] cm, front error "
+          f"{100 * best['track_error']:.2f} %, {result['evaluations']} evaluations, {wall:.0f} s")
 
 
 if __name__ == "__main__":

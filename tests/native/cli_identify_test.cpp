@@ -307,7 +307,7 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         expectBadInput(writeJob(doc, "fixed_uncertainty.json"), "fixed[0].uncertainty: must be ≥ 0");
         doc["fixed"] = json::array();
         doc["parameters"][0] = {{"name", "solids[0].hole_radius"}};
-        expectBadInput(writeJob(doc, "not_a_cup.json"), "solids[0] is not a cup");
+        expectBadInput(writeJob(doc, "not_a_cup.json"), "solids[0] is a ground, and only a cup has it");
     }
 }
 

@@ -374,7 +374,7 @@ TEST(ExtractionOptions, ParsedFromAJobsExtractionObject) {
             EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
         }
     };
-    fails({{"treshold", 100}}, "job.json: extraction.treshold: unknown extraction option");
+    fails({{"treshold", 100}}, "job.json: extraction.treshold: unknown field; did you mean `threshold`?");
     fails({{"clean_plate", "absent.png"}}, "extraction.clean_plate: " + (dir / "absent.png").string() + " not found");
     fails({{"step", 0}}, "job.json: extraction: --step must be ≥ 1");
     fails({{"mog2_shadow_threshold", 1.5}}, "job.json: extraction: --shadow-threshold must be in (0, 1]");

@@ -189,12 +189,19 @@ TEST(Scene, DeclaredParametersResolveSetAndRefuseWhatTheSceneCannotHold) {
     };
     EXPECT_EQ(messageOf("flow_index"), "job: \"flow_index\": the scene's material model is newtonian, and only "
                                         "power_law or carreau or herschel_bulkley has it");
-    EXPECT_EQ(messageOf("solids[0].hole_radius"), "job: \"solids[0].hole_radius\": solids[0] is not a cup");
+    EXPECT_EQ(messageOf("solids[0].hole_radius"),
+              "job: \"solids[0].hole_radius\": solids[0] is a ground, and only a cup has it");
     EXPECT_EQ(messageOf("solids[7].hole_radius"), "job: \"solids[7].hole_radius\": the scene has 2 solids");
-    EXPECT_EQ(messageOf("hole_radius"), "job: \"hole_radius\" is a cup's: name it \"solids[i].hole_radius\", i its "
-                                         "solid's index");
+    EXPECT_EQ(messageOf("hole_radius"), "job: \"hole_radius\" is a solid's: name it \"solids[i].hole_radius\", i its index");
     EXPECT_EQ(messageOf("solids[1].viscosity"), "job: \"solids[1].viscosity\" is not a declared parameter; did you "
                                                  "mean \"viscosity\"? (viscoscope schema lists them)");
+    json channel = validScene();
+    channel["solids"].push_back({{"type", "channel"}, {"center_y", 0.01}, {"width", 0.08}});
+    Scene channelScene = parseScene(channel, "scene.json");
+    setParameter(channelScene, resolveParameter(channelScene, "solids[2].width", "job"), 0.05);
+    EXPECT_DOUBLE_EQ(std::get<ChannelSolid>(channelScene.solids[2]).width, 0.05);
+    EXPECT_DOUBLE_EQ(std::get<ChannelSolid>(parseScene(sceneToJson(channelScene), "again").solids[2]).width, 0.05);
+    EXPECT_THROW(resolveParameter(channelScene, "solids[2].hole_radius", "job"), InputError);
     json powerLaw = validScene();
     powerLaw["material"]["model"] = {{"type", "power_law"}, {"consistency", 4.0}, {"flow_index", 0.6}};
     scene = parseScene(powerLaw, "scene.json");

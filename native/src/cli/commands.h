@@ -30,5 +30,6 @@ Command addIdentifyCommand(CLI::App& app);
 Command addSynthCommand(CLI::App& app);
 Command addCompareCommand(CLI::App& app);
 Command addSchemaCommand(CLI::App& app);
+Command addCheckCommand(CLI::App& app);
 
 }  // namespace viscoscope::cli

@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
         cli::addSynthCommand(app),
         cli::addCompareCommand(app),
         cli::addSchemaCommand(app),
+        cli::addCheckCommand(app),
     };
 
     try {

@@ -46,24 +46,26 @@ const std::vector<ParameterDeclaration> kDeclarations{
      ParameterHome::MaterialModel, {"carreau"}, kRequired, 1e-9, 1e6, true, 1e-3, 1e3, 1, false},
     {"yield_stress", "τ_y", "Pa", "Yield stress of a Herschel–Bulkley liquid", ParameterHome::MaterialModel,
      {"herschel_bulkley"}, 0, 0, 1e6, true, 1e-2, 1e3, 10, false},
-    // A cup's dimensions: searched from the scene's value, within a factor 2 unless the job says.
-    {"inner_radius", "R", "m", "Inner radius of a cup", ParameterHome::Cup, {}, kRequired, 1e-4, 10, true,
+    // A solid's dimensions: searched from the scene's value, within a factor 2 unless the job says.
+    {"inner_radius", "R", "m", "Inner radius of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-4, 10, true,
      kSceneValue, kSceneValue, kSceneValue, false},
-    {"height", "H", "m", "Inner depth of a cup, from its inner bottom to its rim", ParameterHome::Cup, {}, kRequired,
+    {"height", "H", "m", "Inner depth of a cup, from its inner bottom to its rim", ParameterHome::Solid, {"cup"}, kRequired,
      1e-4, 10, true, kSceneValue, kSceneValue, kSceneValue, false},
-    {"wall_thickness", "t_w", "m", "Wall thickness of a cup", ParameterHome::Cup, {}, kRequired, 1e-5, 1, true,
+    {"wall_thickness", "t_w", "m", "Wall thickness of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-5, 1, true,
      kSceneValue, kSceneValue, kSceneValue, false},
-    {"bottom_thickness", "t_b", "m", "Bottom thickness of a cup", ParameterHome::Cup, {}, kRequired, 1e-5, 1, true,
+    {"bottom_thickness", "t_b", "m", "Bottom thickness of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-5, 1, true,
      kSceneValue, kSceneValue, kSceneValue, false},
-    {"hole_radius", "r_h", "m", "Radius of the hole in a cup's bottom (0: none)", ParameterHome::Cup, {}, 0, 0, 10,
+    {"hole_radius", "r_h", "m", "Radius of the hole in a cup's bottom (0: none)", ParameterHome::Solid, {"cup"}, 0, 0, 10,
      true, kSceneValue, kSceneValue, kSceneValue, false},
+    {"width", "W", "m", "Width of a channel between its side walls", ParameterHome::Solid, {"channel"}, kRequired, 1e-4,
+     100, true, kSceneValue, kSceneValue, kSceneValue, false},
 };
 
 const char* homeName(ParameterHome home) {
     switch (home) {
         case ParameterHome::Material: return "material";
         case ParameterHome::MaterialModel: return "material.model";
-        case ParameterHome::Cup: return "solids[i] of type cup";
+        case ParameterHome::Solid: return "solids[i]";
     }
     return "";
 }
@@ -75,6 +77,14 @@ std::string format(double x) {
 }
 
 json orNull(double x) { return std::isnan(x) ? json(nullptr) : json(x); }
+
+struct SolidName {
+    const char* operator()(const GroundSolid&) const { return "ground"; }
+    const char* operator()(const BoxSolid&) const { return "box"; }
+    const char* operator()(const CupSolid&) const { return "cup"; }
+    const char* operator()(const MeshSolid&) const { return "mesh"; }
+    const char* operator()(const ChannelSolid&) const { return "channel"; }
+};
 
 struct ModelName {
     const char* operator()(const Newtonian&) const { return "newtonian"; }
@@ -111,15 +121,17 @@ double* field(Scene& scene, const SceneParameter& p) {
                 if (name == "eta_max") return &hb->etaMax;
             }
             return nullptr;
-        case ParameterHome::Cup: {
+        case ParameterHome::Solid: {
             if (p.solid < 0 || p.solid >= static_cast<int>(scene.solids.size())) return nullptr;
-            auto* cup = std::get_if<CupSolid>(&scene.solids[p.solid]);
-            if (!cup) return nullptr;
-            if (name == "inner_radius") return &cup->innerRadius;
-            if (name == "height") return &cup->height;
-            if (name == "wall_thickness") return &cup->wallThickness;
-            if (name == "bottom_thickness") return &cup->bottomThickness;
-            if (name == "hole_radius") return &cup->holeRadius;
+            if (auto* cup = std::get_if<CupSolid>(&scene.solids[p.solid])) {
+                if (name == "inner_radius") return &cup->innerRadius;
+                if (name == "height") return &cup->height;
+                if (name == "wall_thickness") return &cup->wallThickness;
+                if (name == "bottom_thickness") return &cup->bottomThickness;
+                if (name == "hole_radius") return &cup->holeRadius;
+            } else if (auto* channel = std::get_if<ChannelSolid>(&scene.solids[p.solid])) {
+                if (name == "width") return &channel->width;
+            }
             return nullptr;
         }
     }
@@ -168,7 +180,7 @@ json parameterSchema() {
                    {"lower", d.lower},
                    {"upper", d.upper},
                    {"searchable", d.searchable}};
-        if (d.home == ParameterHome::MaterialModel) entry["models"] = d.models;
+        if (!d.types.empty()) entry["types"] = d.types;
         if (d.searchable)
             entry["search"] = {{"lower", orNull(d.searchLower)},
                                {"upper", orNull(d.searchUpper)},
@@ -206,30 +218,30 @@ SceneParameter resolveParameter(const Scene& scene, const std::string& name, con
         key = name.substr(close + 2);
     }
     p.declaration = findParameterDeclaration(key);
-    if (p.declaration && p.declaration->home == ParameterHome::Cup && p.solid < 0)
-        throw InputError(where + ": \"" + name + "\" is a cup's: name it \"solids[i]." + name + "\", i its solid's index");
-    if (!p.declaration || (p.declaration->home == ParameterHome::Cup) != (p.solid >= 0)) {
+    if (p.declaration && p.declaration->home == ParameterHome::Solid && p.solid < 0)
+        throw InputError(where + ": \"" + name + "\" is a solid's: name it \"solids[i]." + name + "\", i its index");
+    if (!p.declaration || (p.declaration->home == ParameterHome::Solid) != (p.solid >= 0)) {
         std::vector<std::string> names;
         for (const ParameterDeclaration& d : kDeclarations) names.push_back(d.name);
         const std::string near = nearestName(key, names);
         throw InputError(where + ": \"" + name + "\" is not a declared parameter" +
                          (near.empty() ? "" : "; did you mean \"" + near + "\"?") + " (viscoscope schema lists them)");
     }
-    Scene probe = scene;
-    if (!field(probe, p)) {
-        if (p.declaration->home == ParameterHome::Cup)
-            throw InputError(where + ": \"" + name + "\": solids[" + std::to_string(p.solid) + "] is not a cup");
-        std::string models;
-        for (const char* m : p.declaration->models) models += std::string(models.empty() ? "" : " or ") + m;
+    if (!field(const_cast<Scene&>(scene), p)) {
+        std::string types;
+        for (const char* t : p.declaration->types) types += std::string(types.empty() ? "" : " or ") + t;
+        if (p.declaration->home == ParameterHome::Solid)
+            throw InputError(where + ": \"" + name + "\": solids[" + std::to_string(p.solid) + "] is a " +
+                             std::visit(SolidName{}, scene.solids[p.solid]) + ", and only a " + types + " has it");
         throw InputError(where + ": \"" + name + "\": the scene's material model is " +
-                         std::visit(ModelName{}, scene.material.model) + ", and only " + models + " has it");
+                         std::visit(ModelName{}, scene.material.model) + ", and only " + types + " has it");
     }
     return p;
 }
 
 double parameterValue(const Scene& scene, const SceneParameter& parameter) {
-    Scene probe = scene;
-    return *field(probe, parameter);
+    // field() only reads through the pointer here.
+    return *field(const_cast<Scene&>(scene), parameter);
 }
 
 void setParameter(Scene& scene, const SceneParameter& parameter, double value) {

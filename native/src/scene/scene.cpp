@@ -158,7 +158,8 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
             r.fail("path", "mesh must be .obj or .ply, got '" + path.filename().string() + "'");
         return MeshSolid{path};
     }
-    r.fail("type", "unknown solid type '" + type + "' (ground, box, cup, mesh)");
+    if (type == "channel") return ChannelSolid{r.number("center_y", 0.0), r.parameter("width")};
+    r.fail("type", "unknown solid type '" + type + "' (ground, box, cup, mesh, channel)");
 }
 
 LiquidSource parseLiquid(const FieldReader& r, const std::vector<Solid>& solids) {
@@ -402,6 +403,9 @@ struct SolidWriter {
                 {"hole_radius", c.holeRadius}};
     }
     json operator()(const MeshSolid& m) const { return {{"type", "mesh"}, {"path", m.path.string()}}; }
+    json operator()(const ChannelSolid& c) const {
+        return {{"type", "channel"}, {"center_y", c.centerY}, {"width", c.width}};
+    }
 };
 struct LiquidWriter {
     json operator()(const LiquidBox& b) const {

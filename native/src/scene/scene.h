@@ -54,7 +54,14 @@ struct CupSolid {
 struct MeshSolid {
     std::filesystem::path path;  // OBJ or PLY, resolved against the scene file's folder
 };
-using Solid = std::variant<GroundSolid, BoxSolid, CupSolid, MeshSolid>;
+// The side walls of a channel along x: solid wherever |y − centerY| > width / 2. A lab's channel is
+// filmed through its walls, so they never hide the liquid (they have no boundary to draw), and its
+// width is often what the footage does not show: a job may search it ("solids[i].width").
+struct ChannelSolid {
+    double centerY = 0;
+    double width = 0.1;
+};
+using Solid = std::variant<GroundSolid, BoxSolid, CupSolid, MeshSolid, ChannelSolid>;
 
 // Liquid sources.
 struct LiquidBox {
@@ -160,8 +167,8 @@ struct Scene {
 
 enum class ParameterHome {
     Material,       // material.NAME
-    MaterialModel,  // material.model.NAME, for the models in `models`
-    Cup,            // solids[i].NAME of a cup; a job names it "solids[i].NAME"
+    MaterialModel,  // material.model.NAME, for the model types in `types`
+    Solid,          // solids[i].NAME, for the solid types in `types`; a job names it "solids[i].NAME"
 };
 
 struct ParameterDeclaration {
@@ -170,7 +177,7 @@ struct ParameterDeclaration {
     const char* unit;    // SI
     const char* description;
     ParameterHome home;
-    std::vector<const char*> models;  // MaterialModel: the model types that hold it
+    std::vector<const char*> types;   // the model or solid types that hold it
     double defaultValue;              // NaN: required
     double lower, upper;              // physical bounds, inclusive: the readers refuse values outside
     bool searchable;                  // a job may search it (in ln θ: searchLower > 0)
@@ -191,7 +198,7 @@ nlohmann::json parameterSchema();
 struct SceneParameter {
     std::string name;  // as a job names it
     const ParameterDeclaration* declaration = nullptr;
-    int solid = -1;    // Cup: the index into Scene::solids
+    int solid = -1;    // ParameterHome::Solid: the index into Scene::solids
 };
 // Resolves a job's parameter name against a scene; throws InputError (prefixed by `where`) when no
 // declaration has that name or the scene cannot hold it (a Newtonian scene and "flow_index").

@@ -173,7 +173,7 @@ private:
     double interpolateVelocity(int axis, const Vec3& x, Vec3* gradient) const;
     void applyBodyForces(double dt);
     void applySurfaceTension(double dt);
-    void updateViscosity(const StokesProblem& problem);
+    void updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity);
     void transferToParticles();
     void advectParticles(double dt);
 

@@ -770,13 +770,13 @@ void Simulation::applySurfaceTension(double dt) {
     }
 }
 
-// Per-sample viscosity: the material law at the local shear rate of the current velocity
-// (constant when Newtonian).
-void Simulation::updateViscosity(const StokesProblem& problem) {
+// Per-sample viscosity: the material law at the local shear rate of `velocity` (constant when
+// Newtonian).
+void Simulation::updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity) {
     const double eta0 = scene_.material.viscosity;
     const Lattice& cells = cellViscosity_.lattice;
     if (material_->shearDependent()) {
-        const Field rate = cellShearRates(problem, state_.velocity);
+        const Field rate = cellShearRates(problem, velocity);
         for (int c = 0; c < cells.count(); ++c)
             cellViscosity_[c] = fractions_.cell[c] < kMinWeight ? eta0 : material_->viscosity(rate[c]);
     }
@@ -931,6 +931,11 @@ StepStats Simulation::step(double dt) {
     t0 = Clock::now();
     computeFractions();
     extrapolateVelocity(2);
+    // The first Picard iterate's shear rates come from the flow before this step's forces: gravity's
+    // g Δt, uniform in the liquid but cut to zero at the walls, reads as a shear of g Δt / Δx there
+    // and yields a liquid at rest (a Bingham slump never arrested; tests/bench/FINDINGS.md).
+    std::array<Field, 3> flowBeforeForces;
+    if (material_->shearDependent()) flowBeforeForces = state_.velocity;
     applyBodyForces(dt);
     applySurfaceTension(dt);
     stats.otherSeconds += secondsSince(t0);
@@ -954,7 +959,8 @@ StepStats Simulation::step(double dt) {
     const int picard = material_->shearDependent() ? scene_.solver.picardIterations : 1;
     const std::array<Field, 3> uStar = state_.velocity;
     for (int it = 0; it < picard; ++it) {
-        updateViscosity(problem);  // η from u* first, then from the last iterate's shear rates
+        // η from the flow before the forces first, then from the last iterate's shear rates.
+        updateViscosity(problem, it == 0 && material_->shearDependent() ? flowBeforeForces : state_.velocity);
         if (it > 0) state_.velocity = uStar;
         const SolveStats s = solver_->solve(problem, state_);
         stats.solve.iterations += s.iterations;

@@ -49,6 +49,7 @@ struct PrimitiveDistance {
     double operator()(const BoxSolid& b) const { return boxDistance(x, b.min, b.max); }
     double operator()(const CupSolid& c) const { return cupDistance(x, c); }
     double operator()(const MeshSolid&) const { return 1e30; }
+    double operator()(const ChannelSolid& c) const { return 0.5 * c.width - std::abs(x.y() - c.centerY); }
 };
 
 }  // namespace

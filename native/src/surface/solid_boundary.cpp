@@ -59,6 +59,7 @@ struct BoundaryOf {
     TriangleMesh operator()(const BoxSolid& box) const { return boxBoundary(box); }
     TriangleMesh operator()(const CupSolid& cup) const { return cupBoundary(cup, segments); }
     TriangleMesh operator()(const MeshSolid& mesh) const { return loadMesh(mesh.path); }
+    TriangleMesh operator()(const ChannelSolid&) const { return {}; }  // seen through (scene.h)
 };
 
 }  // namespace
