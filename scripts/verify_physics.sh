@@ -4,4 +4,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh engine
-VISCOSCOPE_FULL_VERIFICATION=1 build/tests/native/sim_physics_test
+VISCOSCOPE_FULL_VERIFICATION=1 build/tests/native/sim_physics_test --gtest_also_run_disabled_tests
