@@ -118,7 +118,7 @@ void requireWithinDeclaredBounds(const SceneParameter& parameter, double value, 
         throw InputError(where + ": " + problem + " (" + parameter.name + "'s physical bounds)");
 }
 
-// Bounds and start default to the declaration's; a cup's dimensions to its value in the scene, and
+// Bounds and start default to the declaration's; a solid's dimensions to its value in the scene, and
 // a factor 2 either side of it.
 ParameterSpec parseParameter(const nlohmann::json& p, const Scene& scene, const std::string& where) {
     ParameterSpec spec;
