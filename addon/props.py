@@ -135,7 +135,7 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                    description="Leading liquid-free frames that train the background model (MOG2)")
     var_threshold: FloatProperty(name="Variance Threshold", default=16.0, min=0.0,
                                  description="MOG2 variance threshold")
-    mask_threshold: IntProperty(name="Threshold", default=127, min=0, max=255,
+    mask_threshold: IntProperty(name="Threshold", default=127, min=0, max=254,
                                 description="Mask = MOG2 output > threshold (shadows are 127)")
     shadow_threshold: FloatProperty(name="Shadow Threshold", default=0.7, min=0.01, max=1.0,
                                     description="A pixel darker than the background by a brightness ratio "

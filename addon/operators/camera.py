@@ -146,7 +146,7 @@ class VISCOSCOPE_OT_match_camera(bpy.types.Operator):
                 solved = json.load(fh)
             check_pose_plausible(solved, world, cam.data, k)
             set_camera_from_opencv(cam, solved["R"], solved["t"], k)
-            err = solved.get("reprojection_error")
+            err = solved.get("reprojection_error_px")
             vs.reprojection_error = float(err) if err is not None else reprojection_rms(solved, world, image)
         except (scene_export.ExportError, engine.EngineError, OSError, KeyError, ValueError) as exc:
             self.report({'ERROR'}, str(exc))

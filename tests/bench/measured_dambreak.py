@@ -17,7 +17,8 @@ power-law fit K = 9.712 Pa·sⁿ, n = 0.979; see that folder's README).
 
 With `--unknown channel_width` the viscosity is instead fixed at the viscometer's (the mean of its
 readings, half their spread as the uncertainty: the job's "fixed"), and the width of the channel,
-side walls of a "channel" solid inside a domain `--max-width` wide, is what the front identifies.
+side walls of a "channel" solid inside a domain `--max-width` wide, is what the front identifies;
+with `--unknown both` the front alone identifies the two at once.
 
     /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
     /usr/bin/python3 tests/bench/measured_dambreak.py --unknown channel_width [--max-width 0.3]
@@ -43,10 +44,10 @@ def main():
     parser.add_argument("--generations", type=int, default=30)
     parser.add_argument("--channel-width", type=float, help="m between side walls (default: none, periodic)")
     parser.add_argument("--work", help="folder for the scene, job and results (default: a temporary one)")
-    parser.add_argument("--unknown", choices=("viscosity", "channel_width"), default="viscosity")
+    parser.add_argument("--unknown", choices=("viscosity", "channel_width", "both"), default="viscosity")
     parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
     args = parser.parse_args()
-    if args.unknown == "channel_width":
+    if args.unknown != "viscosity":
         return identify_channel_width(args)
     data = pathlib.Path(args.data).resolve()
     if not data.is_file():
@@ -96,7 +97,7 @@ def main():
 
 
 def identify_channel_width(args):
-    """The channel's width from the filmed front, with η held at the viscometer's."""
+    """The channel's width from the filmed front, with η held at the viscometer's or searched too."""
     data = pathlib.Path(args.data).resolve()
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_width_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -114,10 +115,13 @@ def identify_channel_width(args):
     job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
            "track": {"csv": str(data), "column": "front_m", "observable": "front",
                      "origin": [lock, 0, 0], "direction": [1, 0, 0], "band": 0.0065},
-           "fixed": [{"name": "viscosity", "value": eta, "uncertainty": uncertainty}],
            "parameters": [{"name": "solids[0].width", "initial": 0.1, "spread": 0.05, "min": 0.04,
                            "max": args.max_width}],
            "max_generations": args.generations, "seed": 3}
+    if args.unknown == "both":
+        job["parameters"].append({"name": "viscosity", "initial": 5, "spread": 10, "min": 0.5, "max": 100})
+    else:
+        job["fixed"] = [{"name": "viscosity", "value": eta, "uncertainty": uncertainty}]
     (work / "job.json").write_text(json.dumps(job, indent=1))
     started = time.monotonic()
     identify = subprocess.run([args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress",
@@ -127,11 +131,18 @@ def identify_channel_width(args):
         sys.exit(f"identify failed (exit {identify.returncode}): {identify.stderr.strip()}")
     result = json.loads((work / "identify/result.json").read_text())
     width = result["parameters"]["solids[0].width"]
-    best = [e for e in result["evaluated"] if e["fidelity"] == "full" and e["theta"][0] == width["value"]][0]
-    print(f"dam break, {args.resolution} cells along the channel, η fixed at {eta:.4g} ± {uncertainty:.2g} Pa·s")
+    held = (f"η fixed at {eta:.4g} ± {uncertainty:.2g} Pa·s" if args.unknown == "channel_width" else "η searched too")
+    print(f"dam break, {args.resolution} cells along the channel, {held}")
+    best = [e for e in result["evaluated"]
+            if e["fidelity"] == "full" and e["theta"] == [result["parameters"][p["name"]]["value"]
+                                                          for p in job["parameters"]]][0]
     print(f"identified channel width W* = {100 * width['value']:.2f} cm, interval "
           f"[{100 * width['interval'][0]:.2f}, {100 * width['interval'][1]:.2f}] cm, front error "
           f"{100 * best['track_error']:.2f} %, {result['evaluations']} evaluations, {wall:.0f} s")
+    if args.unknown == "both":
+        viscosity = result["parameters"]["viscosity"]
+        print(f"identified η* = {viscosity['value']:.4g} Pa·s, interval [{viscosity['interval'][0]:.4g}, "
+              f"{viscosity['interval'][1]:.4g}] (viscometer {VISCOMETER[0]}–{VISCOMETER[1]} Pa·s)")
 
 
 if __name__ == "__main__":

@@ -77,6 +77,9 @@ def test_engine_reads_back_the_camera_and_the_job_the_addon_writes(ctx, tmp_work
     vs.video_path = os.path.join(str(tmp_work), "clip.mp4")
     open(vs.video_path, "wb").close()
     vs.background = 'LEADING_FRAMES'
+    # Every extraction setting at the end of its panel range: the engine must take it.
+    for name in ("mask_threshold", "close_diameter", "min_blob", "edge_coverage", "shadow_threshold"):
+        setattr(vs, name, vs.bl_rna.properties[name].hard_max)
     folder = identify.identify_dir(ctx.scene)
     job, _note = identify.write_job(ctx, folder)
     out = _check(engine_path, os.path.join(folder, "blender_camera.json"), os.path.join(folder, "scene.json"), job)

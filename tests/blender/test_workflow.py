@@ -244,6 +244,10 @@ def test_real_engine_match_camera_from_points(ctx, tmp_work, engine_path, use_en
         for j in range(4):
             assert cam.matrix_world[i][j] == pytest.approx(expected[i][j], abs=1e-3)
     assert 0.0 <= ctx.scene.viscoscope.reprojection_error < 0.05
+    # The panel shows the error the engine measured, not one the add-on recomputed.
+    with open(os.path.join(str(tmp_work), "camera", "camera.json")) as fh:
+        solved = json.load(fh)
+    assert ctx.scene.viscoscope.reprojection_error == pytest.approx(solved["reprojection_error_px"], rel=1e-5)
 
 
 def _plate_image(clip_path, folder):
