@@ -311,6 +311,28 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
     }
 }
 
+// A second run on a folder in use would resume from the first's half-written state and answer
+// otherwise: it is refused at once, naming the process; once that process is gone (even by kill -9,
+// which leaves the lock file behind) the folder is free again.
+TEST_F(CliIdentify, ASecondRunOnAFolderInUseIsRefused) {
+    const fs::path jobFile = writeJob(job(3));
+    const fs::path out = dir_ / "shared_out";
+    const pid_t pid = start(jobFile, out);
+    ASSERT_TRUE(waitForGeneration(out, 1, pid)) << slurp(dir_ / "background.err");
+    const CommandResult second = run("identify " + jobFile.string() + " --out " + out.string() + " --progress json");
+    EXPECT_EQ(second.exitCode, 2) << second.err;
+    EXPECT_NE(second.err.find("in use by process " + std::to_string(pid) + " (viscoscope identify)"), std::string::npos)
+        << second.err;
+    EXPECT_EQ(std::count(second.err.begin(), second.err.end(), '\n'), 1) << second.err;
+    std::printf("[ in use   ] %s", second.err.c_str());
+    kill(pid, SIGKILL);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    const CommandResult after = run("identify " + jobFile.string() + " --out " + out.string() +
+                                    " --progress json --no-plots --no-fields");
+    EXPECT_EQ(after.exitCode, 0) << after.err;
+}
+
 TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {
     const fs::path jobFile = writeJob(job(3));
     const auto t0 = std::chrono::steady_clock::now();

@@ -1,5 +1,6 @@
 // `viscoscope extract VIDEO --out DIR`: reference silhouettes, manifest and preview from footage.
 #include "cli/commands.h"
+#include "cli/output_lock.h"
 #include "cli/progress.h"
 #include "observe/observe.h"
 #include "scene/scene.h"
@@ -54,6 +55,7 @@ int runExtract(ExtractArguments& args) {
     if (!args.excludeMask.empty()) options.excludeMask = args.excludeMask;
     if (!args.excludePolygons.empty()) options.excludePolygons = loadPolygons(args.excludePolygons);
     const std::optional<ImageRay> ray = args.frontRay.empty() ? std::nullopt : std::optional(parseRay(args.frontRay));
+    const OutputFolderLock lock(args.outDir, "extract");
     const ProgressReporter progress(args.progress);
     const auto report = [&progress](int done, int total) {
         progress.report({{"event", "progress"}, {"stage", "extract"}, {"done", done}, {"total", total}});

@@ -4,6 +4,7 @@
 // evaluations are spread over the ranks (mpi_ranks.h).
 #include "cli/commands.h"
 #include "cli/mpi_ranks.h"
+#include "cli/output_lock.h"
 #include "cli/progress.h"
 #include "cli/scripts.h"
 #include "identify/identify.h"
@@ -57,6 +58,7 @@ int runIdentify(const IdentifyArguments& args) {
         throw InputError("started by mpirun, but this viscoscope was built without MPI (install Debian's "
                          "mpi-default-dev and build again), and its ranks would each run the whole job");
 #endif
+    const OutputFolderLock lock(args.outDir, "identify");
     const ProgressReporter progress(args.progress);
     Scene atJobResolution = job.scene;
     atJobResolution.domain.resolution = job.resolution;

@@ -5,6 +5,7 @@
 #include "cli/simulation_folder.h"
 
 #include "cli/commands.h"
+#include "cli/output_lock.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -249,7 +250,9 @@ Command addSimulateCommand(CLI::App& app) {
     sub->add_option("--progress", options->progress, "Progress format: text, json or none")
         ->check(CLI::IsMember({"text", "json", "none"}));
     return {sub, [options] {
-                return simulateIntoFolder(loadScene(options->scene), options->out, ProgressReporter(options->progress));
+                const Scene scene = loadScene(options->scene);
+                const OutputFolderLock lock(options->out, "simulate");
+                return simulateIntoFolder(scene, options->out, ProgressReporter(options->progress));
             }};
 }
 

@@ -12,6 +12,7 @@
 //   DIR/clean_plate.png, DIR/exclude.png (the container's projection: 255 = not compared),
 //   DIR/camera.json   (viscoscope.camera), and DIR/synth.json last (truth, settings, timings).
 #include "cli/commands.h"
+#include "cli/output_lock.h"
 #include "cli/progress.h"
 #include "cli/scripts.h"
 #include "cli/simulation_folder.h"
@@ -223,6 +224,7 @@ int runSynth(const SynthArguments& args) {
     requireDomainInView(scene, camera, args.camera);
 
     const fs::path dir = args.outDir, renders = dir / "render", simulation = dir / "simulation";
+    const OutputFolderLock lock(dir, "synth");
     std::error_code ec;
     fs::create_directories(renders, ec);
     if (ec) throw InputError(args.outDir + ": cannot create output folder (" + ec.message() + ")");
