@@ -634,6 +634,20 @@ bool fullVerification() {
     return v && std::string(v) == "1";
 }
 
+// A spreading current's r(t) against the similarity law r = c · scale · t^β: the least-squares
+// exponent of ln r against ln t, and the prefactor c as the mean of r / (scale t^β).
+std::array<double, 2> similarityFit(const std::vector<double>& times, const std::vector<double>& radii, double scale,
+                                    double beta) {
+    const size_t n = times.size();
+    double sx = 0, sl = 0, sxx = 0, sxl = 0, prefactor = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double x = std::log(times[i]), l = std::log(radii[i]);
+        sx += x, sl += l, sxx += x * x, sxl += x * l;
+        prefactor += radii[i] / (scale * std::pow(times[i], beta)) / n;
+    }
+    return {(n * sxl - sx * sl) / (n * sxx - sx * sx), prefactor};
+}
+
 double percentileRadius(const sim::Particles& p, const Vec3& axisPoint, double fraction) {
     std::vector<double> r;
     for (const Vec3& x : p.position) r.push_back(std::hypot(x.x() - axisPoint.x(), x.y() - axisPoint.y()));
@@ -704,17 +718,7 @@ TEST(Physics, HuppertViscousGravityCurrent) {
         }
         gridMomentRadii.push_back(std::sqrt(7.0 / 3.0 * gridR2 / gridVolume));
     }
-    // Least squares ln r = β ln t + c for the exponent; the prefactor is the mean of r_N / (…)^{1/8} t^{1/8}.
-    auto fit = [&](const std::vector<double>& radii) {
-        const size_t n = times.size();
-        double sx = 0, sl = 0, sxx = 0, sxl = 0, prefactor = 0;
-        for (size_t i = 0; i < n; ++i) {
-            const double x = std::log(times[i]), l = std::log(radii[i]);
-            sx += x, sl += l, sxx += x * x, sxl += x * l;
-            prefactor += radii[i] / (scale * std::pow(times[i], 1.0 / 8)) / n;
-        }
-        return std::array<double, 2>{(n * sxl - sx * sl) / (n * sxx - sx * sx), prefactor};
-    };
+    const auto fit = [&](const std::vector<double>& radii) { return similarityFit(times, radii, scale, 1.0 / 8); };
     const auto [exponent, prefactor] = fit(momentRadii);
     const auto [frontExponent, frontPrefactor] = fit(frontRadii);
     const auto [gridExponent, gridPrefactor] = fit(gridMomentRadii);
@@ -805,17 +809,7 @@ TEST(Physics, PowerLawGravityCurrentSpreadsAtItsSimilarityExponent) {
         momentRadii.push_back(std::sqrt(r2 / s.particles().position.size() / secondMoment));
         frontRadii.push_back(percentileRadius(s.particles(), Vec3::Zero(), 0.95) / frontFraction);
     }
-    // Least squares ln r = β ln t + c; the prefactor is the mean of r_N / (scale t^β), against c_n.
-    auto fit = [&](const std::vector<double>& radii) {
-        const size_t m = times.size();
-        double sx = 0, sl = 0, sxx = 0, sxl = 0, prefactor = 0;
-        for (size_t i = 0; i < m; ++i) {
-            const double x = std::log(times[i]), l = std::log(radii[i]);
-            sx += x, sl += l, sxx += x * x, sxl += x * l;
-            prefactor += radii[i] / (scale * std::pow(times[i], beta)) / m;
-        }
-        return std::array<double, 2>{(m * sxl - sx * sl) / (m * sxx - sx * sx), prefactor};
-    };
+    const auto fit = [&](const std::vector<double>& radii) { return similarityFit(times, radii, scale, beta); };
     const auto [exponent, prefactor] = fit(momentRadii);
     const auto [frontExponent, frontPrefactor] = fit(frontRadii);
     std::printf("power-law current n=%.1f (%s, %d cells across, t %.2f–%.0f s, H from %.1f to %.1f cells): second "
