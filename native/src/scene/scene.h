@@ -163,7 +163,7 @@ struct Scene {
 // ---------------------------------------------------------------------------------------------
 // The physical and geometric parameters, each declared once: the scene reader checks its fields
 // against these bounds, a job searches or fixes any of them by name, `viscoscope schema` prints them
-// and the add-on reads that (addon/engine.py).
+// and the add-on reads that (addon/schema.py).
 
 enum class ParameterHome {
     Material,       // material.NAME
