@@ -166,6 +166,8 @@ TEST(Scene, StrictJsonRefusesRepeatedKeysTrailingTextAndDeepNesting) {
     EXPECT_NE(errorOfText(R"({"a": 1e309})").find("scene.json: a number past double's range"), std::string::npos);
     EXPECT_EQ(errorOfText(std::string(100000, '[') + std::string(100000, ']')),
               "scene.json: nested deeper than 64 levels");
+    // A folder given where a file belongs is bad input, not an internal error.
+    EXPECT_THROW(loadScene(std::filesystem::temp_directory_path()), InputError);
 }
 
 // Each parameter is declared once; a job reaches any of them in the scene by name.

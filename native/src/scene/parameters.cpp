@@ -289,6 +289,8 @@ json parseJsonStrictly(std::istream& text, const std::string& origin) {
         throw InputError(origin + ": a number past double's range (" + e.what() + ")");
     } catch (const json::parse_error& e) {
         throw InputError(origin + ": not valid JSON (" + e.what() + ")");
+    } catch (const std::ios_base::failure& e) {  // a folder, or a file that cannot be read
+        throw InputError(origin + ": cannot read (" + e.what() + ")");
     }
 }
 
