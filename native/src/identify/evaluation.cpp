@@ -312,7 +312,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     std::vector<double> trackSimulated, trackMeasured;
     const double trackGround = ground ? *ground : scene.domain.min.z();
     const bool silhouettes = hasSilhouettes(obs);
-    // A searched cup's walls move with θ, and with them what they hide.
+    // A searched solid moves with θ, and with it what the camera can see of the liquid.
     std::optional<SceneVisibility> searchedView;
     if (silhouettes && std::any_of(job.parameters.begin(), job.parameters.end(),
                                    [](const ParameterSpec& p) { return p.parameter.solid >= 0; }))
