@@ -1,13 +1,22 @@
-"""Fluid presets: save → load → apply to a Mantaflow domain (RNA read back), and no code injection."""
+"""Fluid presets: save → load → apply to a Mantaflow domain (RNA read back); names that make the
+same file name; no code injection."""
 
 import ast
 import glob
 import os
+import types
 
 import bpy
 import pytest
 
 from viscoscope import mantaflow, presets, units
+
+
+@pytest.fixture(autouse=True)
+def no_presets(addon):
+    """Each test starts without saved presets (they live in the session's throw-away user config)."""
+    for path in glob.glob(os.path.join(presets.user_preset_dir(), "*.py")):
+        os.remove(path)
 
 
 def _domain(ctx, size=0.2):
@@ -23,6 +32,19 @@ def _domain(ctx, size=0.2):
 
 def _preset_files():
     return set(glob.glob(os.path.join(presets.user_preset_dir(), "*.py")))
+
+
+def _save(name):
+    """Save the fluid as preset `name`; its file's path."""
+    before = _preset_files()
+    assert bpy.ops.viscoscope.fluid_preset_add(name=name) == {'FINISHED'}
+    new = _preset_files() - before
+    assert len(new) == 1, new
+    return new.pop()
+
+
+def _load(path):
+    return bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets")
 
 
 def test_presets_live_in_the_user_config_not_the_addon(addon):
@@ -52,17 +74,13 @@ def test_save_load_apply_to_mantaflow(ctx):
     fluid.model = 'CARREAU'
     fluid.flow_index = 0.8
     fluid.color = (0.9, 0.5, 0.1)
-    before = _preset_files()
-    assert bpy.ops.viscoscope.fluid_preset_add(name="Clover Honey") == {'FINISHED'}
-    new = _preset_files() - before
-    assert len(new) == 1
-    path = new.pop()
+    path = _save("Clover Honey")
     assert os.path.basename(path) == "Clover_Honey.py"
 
     ctx.scene.property_unset("viscoscope")
     assert fluid.viscosity == 8.0 and fluid.model == 'NEWTONIAN'  # defaults, then load:
     ctx.scene.viscoscope.fluid.viscosity = 1.0
-    assert bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets") == {'FINISHED'}
+    assert _load(path) == {'FINISHED'}
     fluid = ctx.scene.viscoscope.fluid
     assert fluid.viscosity == pytest.approx(8.0) and fluid.density == pytest.approx(1400.0)
     assert fluid.model == 'CARREAU' and fluid.flow_index == pytest.approx(0.8)
@@ -124,9 +142,10 @@ HOSTILE = [
 
 
 def _check_preset_file_is_data(path):
-    """A preset file may only import bpy, bind the fluid and assign literals."""
+    """A preset file may only name itself with a string, import bpy, bind the fluid and assign literals."""
     tree = ast.parse(open(path, encoding="utf-8").read())
-    for node in tree.body:
+    assert isinstance(tree.body[0], ast.Expr) and isinstance(tree.body[0].value.value, str)
+    for node in tree.body[1:]:
         if isinstance(node, ast.Import):
             assert [a.name for a in node.names] == ["bpy"]
             continue
@@ -146,22 +165,101 @@ def test_hostile_names_and_values_run_no_code(ctx, tmp_path, template):
     name = template.format(mark=mark_name)
     value = template.format(mark=mark_value)
     ctx.scene.viscoscope.fluid.description = value
-    before = _preset_files()
-    assert bpy.ops.viscoscope.fluid_preset_add(name=name) == {'FINISHED'}
-    new = _preset_files() - before
-    assert len(new) == 1
-    path = new.pop()
+    path = _save(name)
     base = os.path.basename(path)[:-3]
     assert base and all(c.isalnum() or c in "_-" for c in base), base
     _check_preset_file_is_data(path)
+    assert presets.preset_name(path) == name.strip()  # the name round-trips as data too
     ctx.scene.viscoscope.fluid.description = ""
-    assert bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets") == {'FINISHED'}
+    assert _load(path) == {'FINISHED'}
     assert ctx.scene.viscoscope.fluid.description == value  # round-trips as data
     assert not mark_name.exists() and not mark_value.exists()
-    os.remove(path)
 
 
 def test_preset_menu_lists_saved_presets(ctx):
     assert bpy.ops.viscoscope.fluid_preset_add(name="Menu Check") == {'FINISHED'}
     paths = bpy.utils.preset_paths(presets.PRESET_SUBDIR)
     assert any(os.path.isfile(os.path.join(p, "Menu_Check.py")) for p in paths)
+
+
+class MenuLayout:
+    """Stands in for the preset panel's layout: records each button's operator, text and properties."""
+
+    def __init__(self):
+        self.buttons = []
+
+    def column(self, **_kw):
+        return self
+
+    row = column
+
+    def operator(self, idname, text="", **_kw):
+        button = types.SimpleNamespace()
+        self.buttons.append((idname, text, button))
+        return button
+
+    def separator(self):
+        pass
+
+    def prop(self, *_a, **_kw):
+        pass
+
+
+def _draw_preset_panel(context):
+    """The buttons the Fluid Material panel's preset popover draws (background Blender draws no UI)."""
+    cls = presets.VISCOSCOPE_PT_fluid_presets
+    panel = type("PresetPanelDraw", (), {name: getattr(cls, name) for name in
+                                         ("preset_subdir", "preset_operator", "preset_add_operator", "path_menu",
+                                          "draw")})()
+    panel.bl_idname = cls.__name__  # execute_preset's menu
+    panel.layout = MenuLayout()
+    panel.draw(context)
+    return panel.layout.buttons
+
+
+def _entries(buttons, idname):
+    return {text: button for op, text, button in buttons if op == idname and text}
+
+
+def test_names_that_make_the_same_file_name_are_two_presets(ctx):
+    """`!!!` and `☕☕` both make Preset.py: the second gets a file of its own, each keeps its name."""
+    fluid = ctx.scene.viscoscope.fluid
+    fluid.viscosity = 2.0
+    bangs = _save("!!!")
+    fluid.viscosity = 3.0
+    coffee = _save("☕☕")
+    assert os.path.basename(bangs) == "Preset.py" and os.path.basename(coffee) == "Preset_2.py"
+
+    fluid.viscosity = 4.0
+    assert bpy.ops.viscoscope.fluid_preset_add(name="☕☕") == {'FINISHED'}  # the same name overwrites on purpose
+    assert _preset_files() == {bangs, coffee}
+
+    assert _load(bangs) == {'FINISHED'} and fluid.viscosity == pytest.approx(2.0)
+    assert _load(coffee) == {'FINISHED'} and fluid.viscosity == pytest.approx(4.0)
+
+    # The menu shows the names as typed, each loading its own file, and each entry's remove button
+    # removes that preset only.
+    buttons = _draw_preset_panel(ctx)
+    loads = _entries(buttons, "script.execute_preset")
+    assert {name: entry.filepath for name, entry in loads.items()} == {"!!!": bangs, "☕☕": coffee}
+    removes = [button for op, text, button in buttons if op == "viscoscope.fluid_preset_add" and not text
+               and getattr(button, "remove_name", False)]
+    assert sorted(button.name for button in removes) == ["!!!", "☕☕"]
+    assert bpy.ops.viscoscope.fluid_preset_add(name="☕☕", remove_name=True) == {'FINISHED'}
+    assert _preset_files() == {bangs}
+
+
+def test_file_names_keep_letters_of_any_script_but_no_separator_or_dot():
+    assert presets.preset_filename("Crème brûlée, 20 °C") == "Crème_brûlée_20_C"
+    assert presets.preset_filename("Мёд 蜂蜜") == "Мёд_蜂蜜"
+    assert presets.preset_filename("../../startup/evil.py") == "startup_evil_py"
+    assert presets.preset_filename("a\\b\nc\x00d") == "a_b_c_d"
+    assert presets.preset_filename(" ... ") == "Preset"
+
+
+def test_a_long_name_in_any_script_is_kept_whole(ctx):
+    name = "Липовый мёд из Башкирии, собранный в июле, 20 °C"  # 90 bytes: Blender's preset names stop at 63
+    path = _save(name)
+    assert presets.preset_name(path) == name
+    assert os.path.basename(path) == "Липовый_мёд_из_Башкирии_собранный_в_июле_20_C.py"
+    assert len(presets.preset_filename("𝐀" * 300).encode()) + len("_99.py") <= 255
