@@ -15,12 +15,17 @@ The menu shows each preset under that name. Saving under the same name again ove
 name that makes the same file name gets a numbered file (Preset_2.py). File names keep only letters
 and digits of any script, "-" and "_" (see preset_filename).
 
-A Blender preset is a Python file that Blender executes. write_preset writes the name and every
-value with repr(), so no preset name or value can inject code; tests/blender/test_presets.py checks it.
+A preset is never executed. Loading parses it with ast, reads each value with ast.literal_eval and
+checks every one (a preset field, the property's type, finite, within the property's hard bounds,
+an item of its enum) before it applies any, so a damaged, hand-edited or newer preset changes
+nothing and says which file and field are wrong. Saving refuses what loading would (a NaN) and
+writes the name and every value with repr(). So no preset name or value can inject code;
+tests/blender/test_presets.py checks it.
 """
 
 import ast
 import glob
+import math
 import os
 import re
 
@@ -28,14 +33,20 @@ import bpy
 from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 
+from . import props
+
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
 FLUID_FIELDS = ("description", "viscosity", "density", "surface_tension", "slip_length", "model",
                 "consistency", "flow_index", "eta_infinity", "relaxation_time", "yield_stress", "color", "roughness",
                 "transmission")
 
-# The lines Blender's presets bind the fluid with.
+# The lines Blender's presets bind the fluid with: a preset may have them, nothing else but values.
 BOILERPLATE = ("import bpy", "fluid = bpy.context.scene.viscoscope.fluid")
+
+
+class PresetError(ValueError):
+    """A preset that cannot be saved or loaded; the message names the field or line that is wrong."""
 
 
 def user_preset_dir(create=True):
@@ -82,10 +93,44 @@ def _is_vector(prop):
     return prop.type == 'FLOAT' and prop.is_array
 
 
+def _checked_number(field, number, prop):
+    if isinstance(number, bool) or not isinstance(number, (int, float)):
+        raise PresetError("%s: %r is not a number" % (field, number))
+    if not math.isfinite(number):
+        raise PresetError("%s: %r is not a finite number" % (field, number))
+    if not prop.hard_min <= number <= prop.hard_max:
+        raise PresetError("%s: %g is outside %g to %g" % (field, number, prop.hard_min, prop.hard_max))
+    return float(number)
+
+
+def checked_value(field, value):
+    """`value` as the fluid's `field` takes it, or PresetError: a preset is checked whole before
+    any of it is applied, since assigning clamps out-of-range numbers silently and stores a NaN."""
+    if field not in FLUID_FIELDS:
+        raise PresetError("%s: not a field of a fluid preset (one from a newer Viscoscope?)" % field)
+    prop = props.ViscoscopeFluid.bl_rna.properties[field]
+    if prop.type == 'STRING':
+        if not isinstance(value, str):
+            raise PresetError("%s: %r is not text" % (field, value))
+        return value
+    if prop.type == 'ENUM':
+        items = [item.identifier for item in prop.enum_items]
+        if not isinstance(value, str) or value not in items:
+            raise PresetError("%s: %r is not one of %s" % (field, value, ", ".join(items)))
+        return value
+    if _is_vector(prop):
+        if not isinstance(value, (tuple, list)) or len(value) != prop.array_length:
+            raise PresetError("%s: %r is not %d numbers" % (field, value, prop.array_length))
+        return tuple(_checked_number(field, number, prop) for number in value)
+    if prop.type == 'FLOAT':
+        return _checked_number(field, value, prop)
+    raise PresetError("%s: a preset cannot hold a %s property" % (field, prop.type))
+
+
 def fluid_values(fluid):
-    """{field: value} of every preset field of `fluid`."""
+    """{field: value} of every preset field of `fluid`, checked as a loaded preset's are."""
     rna = fluid.bl_rna.properties
-    return {field: getattr(fluid, field)[:] if _is_vector(rna[field]) else getattr(fluid, field)
+    return {field: checked_value(field, getattr(fluid, field)[:] if _is_vector(rna[field]) else getattr(fluid, field))
             for field in FLUID_FIELDS}
 
 
@@ -93,6 +138,38 @@ def write_preset(path, name, values):
     lines = [repr(name), *BOILERPLATE, ""] + ["fluid.%s = %r" % item for item in values.items()]
     with open(path, "w", encoding="utf-8") as fh:
         fh.write("\n".join(lines) + "\n")
+
+
+def _assigned_field(node):
+    """NAME of a `fluid.NAME = ...` statement, else None."""
+    if isinstance(node, ast.Assign) and len(node.targets) == 1:
+        target = node.targets[0]
+        if isinstance(target, ast.Attribute) and isinstance(target.value, ast.Name) and target.value.id == "fluid":
+            return target.attr
+    return None
+
+
+def read_preset(path):
+    """{field: value} of a preset file, parsed and checked, never executed; PresetError says what is wrong."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read())
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise PresetError("cannot be read: %s" % exc) from exc
+    body = tree.body[1:] if ast.get_docstring(tree, clean=False) is not None else tree.body
+    values = {}
+    for node in body:
+        if ast.unparse(node) in BOILERPLATE:
+            continue
+        field = _assigned_field(node)
+        if field is None:
+            raise PresetError("line %d is not a 'fluid.NAME = value' line" % node.lineno)
+        try:
+            value = ast.literal_eval(node.value)
+        except (ValueError, TypeError) as exc:
+            raise PresetError("%s: %s is not a plain value" % (field, ast.unparse(node.value))) from exc
+        values[field] = checked_value(field, value)
+    return values
 
 
 def path_menu_labelled(self, searchpaths, operator, **kwargs):
@@ -105,7 +182,7 @@ def path_menu_labelled(self, searchpaths, operator, **kwargs):
 class VISCOSCOPE_MT_fluid_presets(bpy.types.Menu):
     bl_label = "Viscoscope Fluid Presets"
     preset_subdir = PRESET_SUBDIR
-    preset_operator = "script.execute_preset"
+    preset_operator = "viscoscope.fluid_preset_load"
     preset_add_operator = "viscoscope.fluid_preset_add"
     path_menu = path_menu_labelled
     draw = bpy.types.Menu.draw_preset
@@ -114,9 +191,31 @@ class VISCOSCOPE_MT_fluid_presets(bpy.types.Menu):
 class VISCOSCOPE_PT_fluid_presets(PresetPanel, bpy.types.Panel):
     bl_label = "Viscoscope Fluid Presets"
     preset_subdir = PRESET_SUBDIR
-    preset_operator = "script.execute_preset"
+    preset_operator = "viscoscope.fluid_preset_load"
     preset_add_operator = "viscoscope.fluid_preset_add"
     path_menu = path_menu_labelled
+
+
+class VISCOSCOPE_OT_fluid_preset_load(bpy.types.Operator):
+    """Load this fluid preset into the Fluid Material: all of its values, or none if one is wrong"""
+    bl_idname = "viscoscope.fluid_preset_load"
+    bl_label = "Load Fluid Preset"
+    bl_options = {'REGISTER', 'UNDO', 'INTERNAL'}
+
+    filepath: bpy.props.StringProperty(subtype='FILE_PATH', options={'SKIP_SAVE'})
+
+    def execute(self, context):
+        try:
+            values = read_preset(self.filepath)
+        except PresetError as exc:
+            self.report({'ERROR'}, "Preset %s not loaded: %s" % (os.path.basename(self.filepath), exc))
+            return {'CANCELLED'}
+        fluid = context.scene.viscoscope.fluid
+        for field, value in values.items():
+            setattr(fluid, field, value)
+        # The active preset, as Blender's preset menus keep it (remove_active removes it).
+        VISCOSCOPE_MT_fluid_presets.bl_label = preset_name(self.filepath)
+        return {'FINISHED'}
 
 
 class VISCOSCOPE_OT_fluid_preset_add(AddPresetBase, bpy.types.Operator):
@@ -146,8 +245,12 @@ class VISCOSCOPE_OT_fluid_preset_add(AddPresetBase, bpy.types.Operator):
         name = self.name.strip()
         if not name:
             return {'FINISHED'}  # as AddPresetBase: the dialog closed without a name saves nothing
-        path = find_preset(name) or new_preset_path(name)
-        write_preset(path, name, fluid_values(context.scene.viscoscope.fluid))
+        try:
+            values = fluid_values(context.scene.viscoscope.fluid)
+        except PresetError as exc:
+            self.report({'ERROR'}, "Preset %r not saved: %s" % (name, exc))
+            return {'CANCELLED'}
+        write_preset(find_preset(name) or new_preset_path(name), name, values)
         VISCOSCOPE_MT_fluid_presets.bl_label = name
         wm = context.window_manager
         if wm.preset_name == name:  # as AddPresetBase: the panel's name field is ready for the next one
@@ -155,4 +258,5 @@ class VISCOSCOPE_OT_fluid_preset_add(AddPresetBase, bpy.types.Operator):
         return {'FINISHED'}
 
 
-classes = (VISCOSCOPE_MT_fluid_presets, VISCOSCOPE_PT_fluid_presets, VISCOSCOPE_OT_fluid_preset_add)
+classes = (VISCOSCOPE_MT_fluid_presets, VISCOSCOPE_PT_fluid_presets, VISCOSCOPE_OT_fluid_preset_load,
+           VISCOSCOPE_OT_fluid_preset_add)

@@ -1,5 +1,5 @@
 """Fluid presets: save → load → apply to a Mantaflow domain (RNA read back); names that make the
-same file name; no code injection."""
+same file name; a preset loads whole or not at all; no code injection."""
 
 import ast
 import glob
@@ -44,7 +44,13 @@ def _save(name):
 
 
 def _load(path):
-    return bpy.ops.script.execute_preset(filepath=path, menu_idname="VISCOSCOPE_MT_fluid_presets")
+    return bpy.ops.viscoscope.fluid_preset_load(filepath=path)
+
+
+def _fluid_state(fluid):
+    """Every property of the fluid group, vectors as tuples."""
+    return {name: getattr(fluid, name)[:] if getattr(prop, "is_array", False) else getattr(fluid, name)
+            for name, prop in fluid.bl_rna.properties.items() if name != "rna_type"}
 
 
 def test_presets_live_in_the_user_config_not_the_addon(addon):
@@ -211,7 +217,6 @@ def _draw_preset_panel(context):
     panel = type("PresetPanelDraw", (), {name: getattr(cls, name) for name in
                                          ("preset_subdir", "preset_operator", "preset_add_operator", "path_menu",
                                           "draw")})()
-    panel.bl_idname = cls.__name__  # execute_preset's menu
     panel.layout = MenuLayout()
     panel.draw(context)
     return panel.layout.buttons
@@ -237,10 +242,10 @@ def test_names_that_make_the_same_file_name_are_two_presets(ctx):
     assert _load(bangs) == {'FINISHED'} and fluid.viscosity == pytest.approx(2.0)
     assert _load(coffee) == {'FINISHED'} and fluid.viscosity == pytest.approx(4.0)
 
-    # The menu shows the names as typed, each loading its own file, and each entry's remove button
-    # removes that preset only.
+    # The menu shows the names as typed, each loading its own file through the checking loader,
+    # and each entry's remove button removes that preset only.
     buttons = _draw_preset_panel(ctx)
-    loads = _entries(buttons, "script.execute_preset")
+    loads = _entries(buttons, "viscoscope.fluid_preset_load")
     assert {name: entry.filepath for name, entry in loads.items()} == {"!!!": bangs, "☕☕": coffee}
     removes = [button for op, text, button in buttons if op == "viscoscope.fluid_preset_add" and not text
                and getattr(button, "remove_name", False)]
@@ -263,3 +268,53 @@ def test_a_long_name_in_any_script_is_kept_whole(ctx):
     assert presets.preset_name(path) == name
     assert os.path.basename(path) == "Липовый_мёд_из_Башкирии_собранный_в_июле_20_C.py"
     assert len(presets.preset_filename("𝐀" * 300).encode()) + len("_99.py") <= 255
+
+
+def test_a_nan_is_refused_at_save(ctx):
+    ctx.scene.viscoscope.fluid.surface_tension = float("nan")
+    with pytest.raises(RuntimeError, match=r"Preset 'Broken Honey' not saved: surface_tension: nan is not a finite"):
+        bpy.ops.viscoscope.fluid_preset_add(name="Broken Honey")
+    assert _preset_files() == set()
+
+
+# Hand-written preset files, each good up to its last line: (that line, the message's field).
+BROKEN = {
+    "nan": ("fluid.viscosity = nan", "viscosity: nan is not a plain value"),
+    "overflow": ("fluid.viscosity = 1e999", "viscosity: inf is not a finite number"),
+    "below minimum": ("fluid.density = 50.0", "density: 50 is outside 100 to 25000"),
+    "colour above 1": ("fluid.color = (0.5, 1.5, 0.5)", "color: 1.5 is outside 0 to 1"),
+    "unknown model": ("fluid.model = 'BINGHAM'", "model: 'BINGHAM' is not one of NEWTONIAN, "),
+    "unknown field": ("fluid.thixotropy = 0.2", "thixotropy: not a field of a fluid preset"),
+    "code as a value": ("fluid.description = __import__('os').system('touch {mark}')",
+                        "description: __import__"),
+    "code as a line": ("__import__('os').system('touch {mark}')", "line 6 is not a 'fluid.NAME = value' line"),
+    "syntax": ("fluid.viscosity = = 3", "cannot be read: invalid syntax"),
+}
+
+
+@pytest.mark.parametrize("case", BROKEN)
+def test_a_broken_preset_applies_nothing_and_names_file_and_field(ctx, tmp_path, case):
+    mark = tmp_path / "pwned"
+    line, message = BROKEN[case]
+    path = tmp_path / "Broken_Honey.py"
+    path.write_text("'Broken Honey'\nimport bpy\nfluid = bpy.context.scene.viscoscope.fluid\n"
+                    "fluid.viscosity = 3.0\nfluid.model = 'POWER_LAW'\n%s\n" % line.format(mark=mark),
+                    encoding="utf-8")
+    before = _fluid_state(ctx.scene.viscoscope.fluid)
+    with pytest.raises(RuntimeError) as raised:
+        _load(str(path))
+    assert "Preset Broken_Honey.py not loaded: " + message in str(raised.value)
+    assert "\n" not in str(raised.value).strip()
+    assert _fluid_state(ctx.scene.viscoscope.fluid) == before
+    assert not mark.exists()
+
+
+def test_a_preset_of_blenders_own_writer_loads(ctx, tmp_path):
+    """Presets saved before the name line (by AddPresetBase) still load, named after their files."""
+    path = tmp_path / "Old_Honey.py"
+    path.write_text("import bpy\nfluid = bpy.context.scene.viscoscope.fluid\n\n"
+                    "fluid.viscosity = 6.5\nfluid.color = (0.25, 0.5, 0.75)\n", encoding="utf-8")
+    assert _load(str(path)) == {'FINISHED'}
+    fluid = ctx.scene.viscoscope.fluid
+    assert fluid.viscosity == pytest.approx(6.5) and fluid.color[:] == pytest.approx((0.25, 0.5, 0.75))
+    assert presets.preset_name(str(path)) == "Old Honey"
