@@ -33,13 +33,16 @@ import bpy
 from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 
-from . import props
+from . import props, schema
 
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
-FLUID_FIELDS = ("description", "viscosity", "density", "surface_tension", "slip_length", "model",
-                "consistency", "flow_index", "eta_infinity", "relaxation_time", "yield_stress", "color", "roughness",
-                "transmission")
+# Every material parameter the engine declares (schema.py) that the fluid group holds, and around
+# them the fields that are not the engine's parameters.
+MATERIAL_PARAMETERS = tuple(name for name, declaration in schema.PARAMETERS.items()
+                            if declaration["home"] in ("material", "material.model")
+                            and name in props.ViscoscopeFluid.__annotations__)
+FLUID_FIELDS = ("description", "model") + MATERIAL_PARAMETERS + ("color", "roughness", "transmission")
 
 # The lines Blender's presets bind the fluid with: a preset may have them, nothing else but values.
 BOILERPLATE = ("import bpy", "fluid = bpy.context.scene.viscoscope.fluid")

@@ -9,7 +9,7 @@ import types
 import bpy
 import pytest
 
-from viscoscope import mantaflow, presets, units
+from viscoscope import mantaflow, presets, props, schema, units
 
 
 @pytest.fixture(autouse=True)
@@ -318,3 +318,40 @@ def test_a_preset_of_blenders_own_writer_loads(ctx, tmp_path):
     fluid = ctx.scene.viscoscope.fluid
     assert fluid.viscosity == pytest.approx(6.5) and fluid.color[:] == pytest.approx((0.25, 0.5, 0.75))
     assert presets.preset_name(str(path)) == "Old Honey"
+
+
+def test_a_preset_holds_every_material_parameter_of_the_fluid(addon):
+    material = [name for name, p in schema.PARAMETERS.items() if p["home"].startswith("material")]
+    fluid_props = [name for name in props.ViscoscopeFluid.bl_rna.properties.keys() if name not in ("rna_type", "name")]
+    assert set(presets.MATERIAL_PARAMETERS) == set(material) & set(fluid_props)
+    assert {"viscosity", "consistency", "flow_index", "yield_stress"} <= set(presets.MATERIAL_PARAMETERS)
+    assert sorted(presets.FLUID_FIELDS) == sorted(fluid_props)  # a field added to the group is saved too
+
+
+# Materials set field by field, every model parameter away from its default.
+MATERIALS = {
+    "Herschel–Bulkley": {"description": "Ketchup, 22 °C", "model": 'HERSCHEL_BULKLEY', "viscosity": 40.0,
+                         "density": 1150.0, "surface_tension": 0.055, "slip_length": 2e-4, "consistency": 18.5,
+                         "flow_index": 0.35, "yield_stress": 14.0, "color": (0.7, 0.05, 0.02),
+                         "roughness": 0.3, "transmission": 0.1},
+    "power law": {"description": "Xanthan 0.5 %", "model": 'POWER_LAW', "viscosity": 2.5, "density": 1002.0,
+                  "surface_tension": 0.068, "slip_length": 5e-5, "consistency": 3.25, "flow_index": 0.42,
+                  "color": (0.9, 0.9, 0.85), "roughness": 0.02, "transmission": 0.95},
+}
+
+
+@pytest.mark.parametrize("material", MATERIALS)
+def test_round_trip_restores_every_model_parameter(ctx, material):
+    fluid = ctx.scene.viscoscope.fluid
+    for name, value in MATERIALS[material].items():
+        setattr(fluid, name, value)
+    saved = _fluid_state(fluid)
+    path = _save(material)
+    ctx.scene.property_unset("viscoscope")
+    fluid = ctx.scene.viscoscope.fluid
+    assert fluid.model == 'NEWTONIAN'
+    assert _load(path) == {'FINISHED'}
+    restored = _fluid_state(fluid)
+    assert restored == saved  # exactly: repr() writes each float as it is stored
+    for name, value in MATERIALS[material].items():
+        assert restored[name] == (value if isinstance(value, str) else pytest.approx(value)), name
