@@ -38,11 +38,13 @@ from . import props, schema
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
 # Every material parameter the engine declares (schema.py) that the fluid group holds, and around
-# them the fields that are not the engine's parameters.
+# them the fields that are not the engine's parameters. Loading applies them in this order:
+# identified_from after the viscosity, setting which clears it.
 MATERIAL_PARAMETERS = tuple(name for name, declaration in schema.PARAMETERS.items()
                             if declaration["home"] in ("material", "material.model")
                             and name in props.ViscoscopeFluid.__annotations__)
-FLUID_FIELDS = ("description", "model") + MATERIAL_PARAMETERS + ("color", "roughness", "transmission")
+FLUID_FIELDS = (("description", "model") + MATERIAL_PARAMETERS
+                + ("color", "roughness", "transmission", "identified_from"))
 
 # The lines Blender's presets bind the fluid with: a preset may have them, nothing else but values.
 BOILERPLATE = ("import bpy", "fluid = bpy.context.scene.viscoscope.fluid")
@@ -214,8 +216,9 @@ class VISCOSCOPE_OT_fluid_preset_load(bpy.types.Operator):
             self.report({'ERROR'}, "Preset %s not loaded: %s" % (os.path.basename(self.filepath), exc))
             return {'CANCELLED'}
         fluid = context.scene.viscoscope.fluid
-        for field, value in values.items():
-            setattr(fluid, field, value)
+        for field in FLUID_FIELDS:
+            if field in values:
+                setattr(fluid, field, values[field])
         # The active preset, as Blender's preset menus keep it (remove_active removes it).
         VISCOSCOPE_MT_fluid_presets.bl_label = preset_name(self.filepath)
         return {'FINISHED'}

@@ -60,11 +60,16 @@ class ViscoscopeObjectSettings(bpy.types.PropertyGroup):
     emitter_end: FloatProperty(name="End", unit='TIME_ABSOLUTE', default=1.0, min=0.0)
 
 
+def _viscosity_edited(fluid, _context):
+    fluid.identified_from = ""  # η is no longer what the footage gave
+
+
 class ViscoscopeFluid(bpy.types.PropertyGroup):
     """The fluid material: what a preset stores. Names, units, bounds and defaults are the engine's
     declarations (schema.py); the defaults of required ones are a honey's."""
     description: StringProperty(name="Description", default="")
-    viscosity: FloatProperty(**schema.float_property_args("viscosity", 8.0), soft_max=1000.0, precision=4)
+    viscosity: FloatProperty(**schema.float_property_args("viscosity", 8.0), soft_max=1000.0, precision=4,
+                             update=_viscosity_edited)
     density: FloatProperty(**schema.float_property_args("density", 1400.0))
     surface_tension: FloatProperty(**schema.float_property_args("surface_tension", 0.0), precision=4)
     slip_length: FloatProperty(**schema.float_property_args("slip_length", 0.0), precision=5)
@@ -78,6 +83,9 @@ class ViscoscopeFluid(bpy.types.PropertyGroup):
                                default=(0.8, 0.45, 0.05))
     roughness: FloatProperty(name="Roughness", default=0.05, min=0.0, max=1.0)
     transmission: FloatProperty(name="Transmission", default=0.6, min=0.0, max=1.0)
+    # The footage and interval of an identified η (identify.apply_identified_eta); setting η otherwise
+    # clears it. Shown, not edited.
+    identified_from: StringProperty(name="Identified From", default="")
 
 
 # Where MOG2's background comes from (the job's "clean_plate_frame", "clean_plate" or "background_frames").
@@ -173,6 +181,7 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     result_eta: FloatProperty(name="η", default=0.0, precision=4)
     result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)
     result_eta_high: FloatProperty(name="η high", default=0.0, precision=4)
+    result_footage: StringProperty(name="Footage", default="")  # the video's file name
     # Why the result is probably wrong, one reason a line; while there are any, η is not applied.
     result_doubts: StringProperty(name="Doubts", default="")
     result_applied: BoolProperty(default=False)

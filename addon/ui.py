@@ -250,6 +250,8 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
         draw_labelled(layout, fluid, "description")
         col = layout.column(align=True)
         col.prop(fluid, "viscosity")
+        if fluid.identified_from:
+            draw_message(col, context, "Identified from " + fluid.identified_from, icon='INFO')
         col.prop(fluid, "density")
         col.prop(fluid, "surface_tension")
         col.prop(fluid, "slip_length")

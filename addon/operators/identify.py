@@ -105,16 +105,26 @@ def read_result(context, out_dir):
     doubts = [str(d) for d in result.get("doubts") or ()]  # an older engine writes none
     doubts += bound_doubts(low, high)
     vs.result_eta, vs.result_eta_low, vs.result_eta_high = eta, low, high
+    vs.result_footage = bpy.path.basename(vs.video_path)
     vs.result_doubts = "\n".join(doubts)
-    vs.result_applied = not doubts
+    vs.result_applied = False
     if not doubts:
-        vs.fluid.viscosity = eta
+        apply_identified_eta(vs)
     for name in ("convergence.png", "landscape.png"):
         png = os.path.join(out_dir, name)
         if os.path.isfile(png):
             img = bpy.data.images.load(png, check_existing=True)
             img.reload()
             img.preview_ensure()
+
+
+def apply_identified_eta(vs):
+    """η into the Fluid Material, with the footage and interval it came from (a preset keeps them)."""
+    vs.fluid.viscosity = vs.result_eta  # clears the material's identified_from: set it after
+    vs.fluid.identified_from = "%s: η %.4g Pa·s, interval %.4g–%.4g Pa·s%s" % (
+        vs.result_footage, vs.result_eta, vs.result_eta_low, vs.result_eta_high,
+        ", applied despite the engine's doubts" if vs.result_doubts else "")
+    vs.result_applied = True
 
 
 class VISCOSCOPE_OT_apply_result(bpy.types.Operator):
@@ -130,8 +140,7 @@ class VISCOSCOPE_OT_apply_result(bpy.types.Operator):
 
     def execute(self, context):
         vs = context.scene.viscoscope
-        vs.fluid.viscosity = vs.result_eta
-        vs.result_applied = True
+        apply_identified_eta(vs)
         self.report({'INFO'}, "η = %.4g Pa·s applied to the Fluid Material" % vs.result_eta)
         return {'FINISHED'}
 

@@ -328,6 +328,35 @@ def test_a_preset_holds_every_material_parameter_of_the_fluid(addon):
     assert sorted(presets.FLUID_FIELDS) == sorted(fluid_props)  # a field added to the group is saved too
 
 
+def test_a_preset_keeps_where_its_viscosity_was_identified(ctx, tmp_path):
+    from viscoscope.operators import identify
+    vs = ctx.scene.viscoscope
+    vs.result_eta, vs.result_eta_low, vs.result_eta_high = 7.9, 7.5, 8.3
+    vs.result_footage = "honey_drip.mp4"
+    identify.apply_identified_eta(vs)
+    identified = "honey_drip.mp4: η 7.9 Pa·s, interval 7.5–8.3 Pa·s"
+    assert vs.fluid.identified_from == identified
+    path = _save("Identified Honey")
+    ctx.scene.property_unset("viscoscope")  # frees vs: read the fluid anew below
+    assert _load(path) == {'FINISHED'}
+    fluid = ctx.scene.viscoscope.fluid
+    assert fluid.identified_from == identified and fluid.viscosity == pytest.approx(7.9)
+
+    # Whatever the file's order, the viscosity (whose setting clears it) is set first.
+    lines = open(path, encoding="utf-8").read().splitlines()
+    moved = [lines[0]] + [line for line in lines[1:] if "identified_from" in line] + \
+        [line for line in lines[1:] if "identified_from" not in line]
+    (tmp_path / "Reordered.py").write_text("\n".join(moved), encoding="utf-8")
+    fluid.identified_from = ""
+    assert _load(str(tmp_path / "Reordered.py")) == {'FINISHED'}
+    assert fluid.identified_from == identified
+
+    # A preset without it (an older one) leaves no claim behind.
+    (tmp_path / "Plain.py").write_text("fluid.viscosity = 2.0\n", encoding="utf-8")
+    assert _load(str(tmp_path / "Plain.py")) == {'FINISHED'}
+    assert fluid.identified_from == ""
+
+
 # Materials set field by field, every model parameter away from its default.
 MATERIALS = {
     "Herschel–Bulkley": {"description": "Ketchup, 22 °C", "model": 'HERSCHEL_BULKLEY', "viscosity": 40.0,

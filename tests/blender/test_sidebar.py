@@ -62,6 +62,7 @@ def test_long_messages_are_wrapped_in_every_panel(ctx):
     vs.identify_job.note = "Resolution 60 used: the cup's hole needs 4.5 cells across"
     vs.result_eta, vs.result_eta_low, vs.result_eta_high = 3.0, 1e-3, 4.0
     vs.result_doubts = LONG_WARNING
+    vs.fluid.identified_from = "honey_drip_filmed_on_a_phone.mp4: η 7.9 Pa·s, interval 7.5–8.3 Pa·s"
     labels = _draw_all(ctx.scene, DEFAULT_SIDEBAR_PX)
     width = ui.wrap_width(types.SimpleNamespace(region=types.SimpleNamespace(width=DEFAULT_SIDEBAR_PX),
                                                 preferences=bpy.context.preferences))
@@ -70,7 +71,7 @@ def test_long_messages_are_wrapped_in_every_panel(ctx):
     assert too_long == [], too_long
     # Nothing is lost: each message is there, in pieces (a word longer than a line is split too).
     text = "".join("".join(labels).split())
-    for message in (LONG_WARNING, LONG_ERROR, vs.identify_job.note):
+    for message in (LONG_WARNING, LONG_ERROR, vs.identify_job.note, vs.fluid.identified_from):
         assert "".join(message.split()) in text
     # A narrow sidebar is not a wide one: wrapping follows the region.
     assert len(_draw_all(ctx.scene, 3 * DEFAULT_SIDEBAR_PX)) < len(labels)

@@ -354,23 +354,33 @@ def test_doubtful_result_waits_for_apply_anyway(ctx, tmp_path):
     from viscoscope.operators import identify
     vs = ctx.scene.viscoscope
     vs.fluid.viscosity = 8.0
+    vs.video_path = "//footage/honey_drip.mp4"
     doubts = ["viscosity: E varies by 0.4 % over the search, nearly flat", "frame 12: reference liquid no θ can put"]
     _write_result(tmp_path, 3.0, [2.5, 3.5], doubts=doubts)
     identify.read_result(ctx, str(tmp_path))
+    vs.video_path = "//footage/another_liquid.mp4"  # loaded since: the result is still the first one's
     assert vs.result_eta == pytest.approx(3.0) and vs.fluid.viscosity == pytest.approx(8.0)
     assert vs.result_doubts.splitlines() == doubts and not vs.result_applied
+    assert vs.fluid.identified_from == ""
     assert bpy.ops.viscoscope.apply_result() == {'FINISHED'}
     assert vs.fluid.viscosity == pytest.approx(3.0) and vs.result_applied
+    assert vs.fluid.identified_from == ("honey_drip.mp4: η 3 Pa·s, interval 2.5–3.5 Pa·s, "
+                                        "applied despite the engine's doubts")
     assert not bpy.ops.viscoscope.apply_result.poll()
 
 
 @pytest.mark.parametrize("extra", [{}, {"doubts": []}], ids=["older engine", "no doubts"])
 def test_result_without_doubts_sets_the_material(ctx, tmp_path, extra):
     from viscoscope.operators import identify
+    vs = ctx.scene.viscoscope
+    vs.video_path = "//footage/honey_drip.mp4"
     _write_result(tmp_path, 3.0, [2.5, 3.5], **extra)
     identify.read_result(ctx, str(tmp_path))
-    vs = ctx.scene.viscoscope
     assert vs.fluid.viscosity == pytest.approx(3.0) and vs.result_applied and vs.result_doubts == ""
+    # The material says where η came from (a preset keeps it) until η is set otherwise.
+    assert vs.fluid.identified_from == "honey_drip.mp4: η 3 Pa·s, interval 2.5–3.5 Pa·s"
+    vs.fluid.viscosity = 4.0
+    assert vs.fluid.identified_from == ""
 
 
 @pytest.mark.parametrize("bound_end", [0, 1])
