@@ -140,9 +140,17 @@ def fluid_values(fluid):
 
 
 def write_preset(path, name, values):
+    """Whole or not at all: a full disk leaves the previous preset, not half of a new one."""
     lines = [repr(name), *BOILERPLATE, ""] + ["fluid.%s = %r" % item for item in values.items()]
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(lines) + "\n")
+    partial = path + ".partial"
+    try:
+        with open(partial, "w", encoding="utf-8") as fh:
+            fh.write("\n".join(lines) + "\n")
+        os.replace(partial, path)
+    except OSError:
+        if os.path.exists(partial):
+            os.remove(partial)
+        raise
 
 
 def _assigned_field(node):

@@ -333,6 +333,21 @@ TEST_F(CliIdentify, ASecondRunOnAFolderInUseIsRefused) {
     EXPECT_EQ(after.exitCode, 0) << after.err;
 }
 
+// An evaluation whose fields cannot be written stops the run with exit 1 naming the file: scored as
+// a failed evaluation it would have changed the answer. RLIMIT_FSIZE stands in for a full disk (see
+// cli_simulate_test): an evaluation's fields do not fit under it.
+TEST_F(CliIdentify, AnEvaluationThatCannotWriteStopsTheRun) {
+    const fs::path jobFile = writeJob(job(3)), out = dir_ / "out";
+    const CommandResult r = runCommand("ulimit -f 32; trap '' XFSZ; exec " + std::string(VISCOSCOPE_CLI) +
+                                           " identify " + jobFile.string() + " --out " + out.string() +
+                                           " --progress json --no-plots",
+                                       dir_);
+    EXPECT_EQ(r.exitCode, 1) << r.err;
+    EXPECT_NE(r.err.find((out / "fields.partial").string()), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(": cannot write (File too large)"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(out / "result.json"));
+}
+
 TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {
     const fs::path jobFile = writeJob(job(3));
     const auto t0 = std::chrono::steady_clock::now();
@@ -407,6 +422,24 @@ TEST_F(CliIdentify, SigtermCheckpointsAndExits3ThenResumes) {
                                       " --progress json --no-plots --no-fields");
     EXPECT_EQ(resumed.exitCode, 0) << resumed.err;
     EXPECT_EQ(json::parse(slurp(out / "result.json")).at("resumed_from_generation").get<int>(), saved);
+}
+
+// A cancel abandons the generation in flight instead of finishing it (each of its evaluations takes
+// about a second here): the checkpoint stays at the generation before, and a resume redoes it.
+TEST_F(CliIdentify, SigtermAbandonsTheGenerationInFlight) {
+    json slow = job(4);
+    slow["resolution"] = 32;
+    const fs::path jobFile = writeJob(slow), out = dir_ / "out";
+    const pid_t pid = start(jobFile, out);
+    ASSERT_TRUE(waitForGeneration(out, 1, pid)) << slurp(dir_ / "background.err");
+    kill(pid, SIGTERM);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 3) << slurp(dir_ / "background.err");
+    EXPECT_EQ(json::parse(slurp(out / "checkpoint.json")).at("cma").at("generation").get<int>(), 1);
+    EXPECT_NE(slurp(dir_ / "background.out").find("cancelled in generation 2"), std::string::npos)
+        << slurp(dir_ / "background.out");
 }
 
 TEST_F(CliIdentify, ACheckpointOfAnotherJobIsRefusedAndMoreGenerationsContinue) {

@@ -270,8 +270,9 @@ TEST(Extraction, CancelLeavesNoManifest) {
     ExtractionOptions options;
     options.backgroundFrames = 2;
     options.fps = 30;
-    const std::atomic<bool> cancel{true};
-    EXPECT_THROW(extractSilhouettes(dir, options, dir / "out", {}, &cancel), Cancelled);
+    requestCancel();
+    EXPECT_THROW(extractSilhouettes(dir, options, dir / "out"), Cancelled);
+    withdrawCancel();
     EXPECT_FALSE(fs::exists(dir / "out" / "manifest.json"));
     EXPECT_FALSE(fs::exists(dir / "out" / "masks"));
     const ReferenceManifest manifest = extractSilhouettes(dir, options, dir / "out");

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <fstream>
 #include <sstream>
+#include <unistd.h>
 
 using namespace viscoscope;
 using nlohmann::json;
@@ -222,4 +224,39 @@ TEST(Scene, DeclaredParametersResolveSetAndRefuseWhatTheSceneCannotHold) {
             EXPECT_GE(p.at("search").at("lower").get<double>(), p.at("lower").get<double>()) << p;
     }
     EXPECT_EQ(parseScene(sceneToJson(scene), "round trip").material.model.index(), scene.material.model.index());
+}
+
+// A write is whole or not at all: a full disk or a folder in the way is an OutputError naming the
+// file and the reason, and leaves the previous file as it was and no .partial behind.
+TEST(Scene, FilesAreWrittenWholeOrNotAtAll) {
+    namespace fs = std::filesystem;
+    const fs::path dir = fs::temp_directory_path() / ("viscoscope_output_files_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const fs::path file = dir / "result.json", partial = dir / "result.json.partial";
+    writeJsonAtomically(json{{"E", 1}}, file);
+    EXPECT_EQ(json::parse(std::ifstream(file)), (json{{"E", 1}}));
+    EXPECT_FALSE(fs::exists(partial));
+
+    const auto errorOfWrite = [&] {
+        try {
+            writeJsonAtomically(json{{"E", 2}}, file);
+        } catch (const OutputError& e) {
+            return std::string(e.what());
+        }
+        return std::string();
+    };
+    fs::create_symlink("/dev/full", partial);  // every write to it fails with ENOSPC, as on a full disk
+    EXPECT_EQ(errorOfWrite(), file.string() + ": cannot write (No space left on device)");
+    EXPECT_FALSE(fs::exists(fs::symlink_status(partial)));
+    fs::create_directories(partial / "blocking");
+    EXPECT_NE(errorOfWrite().find(file.string() + ": cannot write (Is a directory)"), std::string::npos);
+    fs::remove_all(partial);
+    EXPECT_EQ(json::parse(std::ifstream(file)), (json{{"E", 1}}));
+
+    fs::remove(file);
+    fs::create_directories(file / "blocking");  // a folder where the file goes: the rename fails
+    EXPECT_NE(errorOfWrite().find(file.string() + ": cannot write ("), std::string::npos);
+    EXPECT_FALSE(fs::exists(partial));
+    fs::remove_all(dir);
 }

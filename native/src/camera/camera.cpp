@@ -312,9 +312,7 @@ nlohmann::json cameraToJson(const PinholeCamera& camera) {
 }
 
 void saveCamera(const PinholeCamera& camera, const std::filesystem::path& file) {
-    std::ofstream stream(file);
-    if (!stream) throw InputError(file.string() + ": cannot write camera file");
-    stream << cameraToJson(camera).dump(2) << "\n";
+    writeJsonAtomically(cameraToJson(camera), file);
 }
 
 }  // namespace viscoscope

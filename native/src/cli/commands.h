@@ -9,9 +9,6 @@
 
 namespace viscoscope::cli {
 
-// Set by SIGINT/SIGTERM. Long commands poll it, save their state and return kExitCancelled.
-extern std::atomic<bool> g_cancelRequested;
-
 inline constexpr int kExitOk = 0;
 inline constexpr int kExitInternal = 1;
 inline constexpr int kExitBadInput = 2;

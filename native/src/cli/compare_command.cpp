@@ -89,7 +89,7 @@ int runCompare(const CompareArguments& args) {
     nlohmann::json perFrame = nlohmann::json::array();
     surface::FieldDifference total;
     for (int f : frames) {
-        if (g_cancelRequested) return kExitCancelled;
+        if (cancelRequested()) return kExitCancelled;
         const surface::FieldDifference d =
             surface::compareFields(surface::readFrameFields(referenceDir / frameName("frame", f, "vdb")),
                                    surface::readFrameFields(simDir / frameName("frame", f, "vdb")));

@@ -62,7 +62,7 @@ int runExtract(ExtractArguments& args) {
     };
     try {
         const ReferenceManifest manifest =
-            extractSilhouettes(args.source, options, args.outDir, report, &g_cancelRequested);
+            extractSilhouettes(args.source, options, args.outDir, report);
         const std::filesystem::path tracks = std::filesystem::path(args.outDir) / "tracks.csv";
         saveScalarTrackCsv(tracksFromMasks(manifest, ray), tracks);
         progress.report({{"event", "done"}, {"frames", manifest.frames.size()},

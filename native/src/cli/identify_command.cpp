@@ -64,7 +64,6 @@ int runIdentify(const IdentifyArguments& args) {
     atJobResolution.domain.resolution = job.resolution;
     for (const std::string& warning : resolutionWarnings(atJobResolution)) progress.warn(warning);
     options.threads = args.threads;
-    options.cancel = &g_cancelRequested;
     options.writeFields = !args.noFields;
     options.onWarning = [&](const std::string& warning) { progress.warn(warning); };
     options.onGeneration = [&](const identify::GenerationReport& r) {

@@ -1,5 +1,5 @@
 // Entry point: registers the sub-commands, installs the cancel signal handlers, and maps errors to
-// exit codes (0 ok, 2 bad input with a one-line reason, 3 cancelled, 1 internal error).
+// exit codes (0 ok, 2 bad input with a one-line reason, 3 cancelled, 1 a failed write or an internal error).
 #include "cli/commands.h"
 #include "scene/scene.h"
 
@@ -7,12 +7,8 @@
 #include <iostream>
 #include <vector>
 
-namespace viscoscope::cli {
-std::atomic<bool> g_cancelRequested{false};
-}
-
 namespace {
-extern "C" void requestCancel(int) { viscoscope::cli::g_cancelRequested = true; }
+extern "C" void onCancelSignal(int) { viscoscope::requestCancel(); }
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -40,8 +36,8 @@ int main(int argc, char** argv) {
         return code == 0 ? cli::kExitOk : cli::kExitBadInput;
     }
 
-    std::signal(SIGINT, requestCancel);
-    std::signal(SIGTERM, requestCancel);
+    std::signal(SIGINT, onCancelSignal);
+    std::signal(SIGTERM, onCancelSignal);
     try {
         for (const cli::Command& command : commands)
             if (command.sub->parsed()) return command.run();
@@ -49,6 +45,12 @@ int main(int argc, char** argv) {
     } catch (const InputError& e) {
         std::cerr << "viscoscope: " << e.what() << "\n";
         return cli::kExitBadInput;
+    } catch (const Cancelled& e) {  // before a command's own loop, e.g. in a hole calibration
+        std::cerr << "viscoscope: " << e.what() << "\n";
+        return cli::kExitCancelled;
+    } catch (const OutputError& e) {
+        std::cerr << "viscoscope: " << e.what() << "\n";  // the disk's or the folder's fault, not the engine's
+        return cli::kExitInternal;
     } catch (const std::exception& e) {
         std::cerr << "viscoscope: internal error: " << e.what() << "\n";
         return cli::kExitInternal;

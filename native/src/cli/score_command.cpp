@@ -111,16 +111,6 @@ cv::Mat1b simulatedSilhouette(const fs::path& file, const PinholeCamera& camera,
     return rasterizeMesh(mesh.vertices, mesh.triangles, camera, view);
 }
 
-void writeJsonAtomically(const nlohmann::json& doc, const fs::path& file) {
-    const fs::path partial = file.string() + ".partial";
-    {
-        std::ofstream stream(partial);
-        stream << doc.dump(2) << "\n";
-        if (!stream) throw std::runtime_error(partial.string() + ": cannot write");
-    }
-    fs::rename(partial, file);
-}
-
 int runScore(const ScoreArguments& args) {
     openvdb::initialize();
     const PinholeCamera camera = loadCamera(args.camera);
@@ -163,7 +153,7 @@ int runScore(const ScoreArguments& args) {
     double objective = 0;
     const int total = static_cast<int>(reference.frames.size());
     for (int j = 0; j < total; ++j) {
-        if (g_cancelRequested) {
+        if (cancelRequested()) {
             progress.report({{"event", "cancelled"}, {"stage", "score"}});
             return kExitCancelled;
         }
@@ -179,7 +169,7 @@ int runScore(const ScoreArguments& args) {
             entry["E_f"] = frameE;
             entry["iou"] = intersectionOverUnion(simulated, observed, compared);
             const fs::path diff = fs::path(args.outDir) / numbered("diff_%05d.png", reference.frames[j]);
-            cv::imwrite(diff.string(), differenceImage(simulated, observed, compared));
+            writeImage(differenceImage(simulated, observed, compared), diff);
         }
         frames.push_back(entry);
         progress.report({{"event", "progress"}, {"stage", "score"}, {"done", j + 1}, {"total", total}});

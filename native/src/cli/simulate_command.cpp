@@ -66,9 +66,11 @@ void writeFrame(const sim::Simulation& simulation, const std::filesystem::path& 
 
 using Clock = std::chrono::steady_clock;
 
-// The state is saved after a frame once this long has passed since the last save, and when the
-// run is cancelled: at 96³ it is 0.13 GB (the sample cup), whose writing every frame would be felt.
-constexpr double kResumeSaveInterval = 60;  // s
+// The state is saved after the first frame, then after a frame once the longer of these has passed
+// since the last save: at 96³ it is 0.13 GB (the sample cup), whose writing every frame would be
+// felt, while a cancel inside a frame loses what was simulated since the last save.
+constexpr double kMinResumeSaveInterval = 5;  // s
+constexpr double kResumeSaveCostShare = 0.05;  // of the run's time spent saving, at most
 const char* const kResumeFile = "resume.state";
 
 // What the run has done so far besides the simulation's own state: resume.state holds it as a
@@ -87,16 +89,12 @@ void saveResumeState(const std::filesystem::path& dir, const RunRecord& record, 
                                 {"frames", record.frames}, {"initial_volume", record.initialVolume},
                                 {"wall_seconds", wallSeconds}};
     const std::string text = header.dump();
-    const std::filesystem::path partial = dir / (std::string(kResumeFile) + ".partial");
-    {
-        std::ofstream out(partial, std::ios::binary);
+    writeFileAtomically(dir / kResumeFile, [&](std::ostream& out) {  // a kill mid-write leaves the last one whole
         const uint64_t length = text.size();
         out.write(reinterpret_cast<const char*>(&length), sizeof length);
         out << text;
         simulation.saveState(out);
-        if (!out) throw std::runtime_error(partial.string() + ": cannot write");
-    }
-    std::filesystem::rename(partial, dir / kResumeFile);  // a kill mid-write leaves the last one whole
+    });
 }
 
 // The record of the run DIR/resume.state continues, with `simulation` restored to its last frame;
@@ -201,9 +199,18 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
     };
 
     const int firstFrame = simulation.frame();
+    int savedFrame = resumed ? firstFrame : -1;  // the frame resume.state holds
     auto lastSave = Clock::now();
+    double saveSeconds = 0;
     for (int f = firstFrame; f < scene.frames; ++f) {
-        const sim::FrameStats stats = simulation.advanceFrame();
+        sim::FrameStats stats;
+        try {
+            stats = simulation.advanceFrame();
+        } catch (const Cancelled&) {  // between two steps, a state no resume can start from
+            progress.report({{"event", "cancelled"}, {"stage", "simulate"}, {"frame", simulation.frame()},
+                             {"resumes_from_frame", std::max(savedFrame, 0)}});
+            return kExitCancelled;
+        }
         writeFrame(simulation, dir);
         const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
         record.frames.push_back(
@@ -217,11 +224,16 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
                          {"iterations", stats.solverIterations}, {"volume", stats.liquidVolume},
                          {"elapsed", elapsed}, {"remaining_s", elapsed / (f + 1 - firstFrame) * (scene.frames - f - 1)}});
         if (f + 1 == scene.frames) break;  // complete, even if cancelled just now
-        if (g_cancelRequested || std::chrono::duration<double>(Clock::now() - lastSave).count() >= kResumeSaveInterval) {
+        const double sinceSave = std::chrono::duration<double>(Clock::now() - lastSave).count();
+        if (savedFrame < 0 || cancelRequested() ||
+            sinceSave >= std::max(kMinResumeSaveInterval, saveSeconds / kResumeSaveCostShare)) {
+            const auto saveStart = Clock::now();
             saveResumeState(dir, record, wallSeconds(), simulation);
             lastSave = Clock::now();
+            saveSeconds = std::chrono::duration<double>(lastSave - saveStart).count();
+            savedFrame = stats.frame;
         }
-        if (g_cancelRequested) {
+        if (cancelRequested()) {
             progress.report({{"event", "cancelled"}, {"stage", "simulate"}, {"frame", stats.frame}});
             return kExitCancelled;
         }
@@ -233,8 +245,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
                               {"hole_calibrations", holes},
                               {"wall_seconds", wallSeconds()}};
     if (resumed) summary["resumed_from_frame"] = firstFrame;
-    std::ofstream(dir / "simulation.json.tmp") << summary.dump(1);
-    std::filesystem::rename(dir / "simulation.json.tmp", dir / "simulation.json");
+    writeJsonAtomically(summary, dir / "simulation.json");
     std::filesystem::remove(dir / kResumeFile, ec);
     progress.report({{"event", "done"}, {"stage", "simulate"}, {"frames", scene.frames},
                      {"elapsed", std::chrono::duration<double>(Clock::now() - start).count()},

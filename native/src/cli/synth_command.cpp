@@ -135,7 +135,7 @@ bool runBlender(const fs::path& blender, const fs::path& script, const fs::path&
     }
     int status = 0;
     while (waitpid(pid, &status, WNOHANG) == 0) {
-        if (g_cancelRequested) {
+        if (cancelRequested()) {
             kill(pid, SIGTERM);
             waitpid(pid, &status, 0);
             return false;
@@ -151,12 +151,6 @@ bool runBlender(const fs::path& blender, const fs::path& script, const fs::path&
         if (line.find("Error") != std::string::npos) reason = line;
     const std::string how = WIFEXITED(status) ? "exit " + std::to_string(WEXITSTATUS(status)) : "killed by a signal";
     throw std::runtime_error("Blender failed (" + how + (reason.empty() ? "" : ": " + reason) + "); see " + log.string());
-}
-
-void writeJsonFile(const nlohmann::json& doc, const fs::path& file) {
-    std::ofstream stream(file);
-    stream << doc.dump(1) << "\n";
-    if (!stream) throw std::runtime_error(file.string() + ": cannot write");
 }
 
 // A render at the supersampled size, averaged down to the camera's pixels in linear light, as a
@@ -190,7 +184,7 @@ void writeTrueMasks(const std::vector<fs::path>& renders, const PinholeCamera& b
         cv::cvtColor(cameraPicture(renders[f], big, size), grey, cv::COLOR_BGR2GRAY);
         const cv::Mat1b mask = srgbToLinear(grey) >= 0.5;
         const std::string name = frameName("masks/mask", static_cast<int>(f), "png");
-        if (!cv::imwrite((dir / name).string(), mask)) throw std::runtime_error((dir / name).string() + ": cannot write");
+        writeImage(mask, dir / name);
         manifest.frames.push_back(static_cast<int>(f));
         manifest.times.push_back(f / fps);
         manifest.weights.push_back(1);
@@ -249,7 +243,7 @@ int runSynth(const SynthArguments& args) {
     if (anyVisible == 0)
         throw InputError(args.camera + ": the camera sees no liquid in any of the " + std::to_string(scene.frames + 1) +
                          " frames (out of the picture, or hidden by the container)");
-    if (!cv::imwrite((dir / "exclude.png").string(), excluded)) throw std::runtime_error("cannot write exclude.png");
+    writeImage(excluded, dir / "exclude.png");
     if (!container.triangles.empty()) surface::writeObj(renders / "solids.obj", container);
 
     // 3. Blender renders the clean plate and every frame at the supersampled size. Renders that a
@@ -293,7 +287,7 @@ int runSynth(const SynthArguments& args) {
     for (const fs::path& image : images) keepIfWhole(image);
     for (const fs::path& image : maskImages) keepIfWhole(image);
     if (kept > 0) progress.report({{"event", "resumed"}, {"stage", "render"}, {"kept_images", kept}});
-    writeJsonFile(spec, renders / "render.json");
+    writeJsonAtomically(spec, renders / "render.json");
     size_t rendered = 0;
     const auto reportRendered = [&] {
         while (rendered < images.size() && fs::exists(images[rendered])) {
@@ -312,13 +306,12 @@ int runSynth(const SynthArguments& args) {
     // 4. Down to the camera's size (area averaging in linear light) and into a lossy clip.
     const auto encodeStart = Clock::now();
     const cv::Size size(camera.width, camera.height);
-    if (!cv::imwrite((dir / "clean_plate.png").string(), cameraPicture(renders / "clean_plate.png", big, size)))
-        throw std::runtime_error("cannot write clean_plate.png");
+    writeImage(cameraPicture(renders / "clean_plate.png", big, size), dir / "clean_plate.png");
     const fs::path partial = dir / "reference.partial.mp4";  // the extension picks the container
     cv::VideoWriter video(partial.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), scene.fps, size);
     if (!video.isOpened()) throw std::runtime_error(partial.string() + ": OpenCV cannot write an mp4v video");
     for (size_t f = 0; f < images.size(); ++f) {
-        if (g_cancelRequested) {
+        if (cancelRequested()) {
             progress.report({{"event", "cancelled"}, {"stage", "encode"}, {"done", f}});
             return kExitCancelled;
         }
@@ -326,6 +319,10 @@ int runSynth(const SynthArguments& args) {
         progress.report({{"event", "progress"}, {"stage", "encode"}, {"done", f + 1}, {"total", images.size()}});
     }
     video.release();
+    // VideoWriter reports no failed write (a full disk): the clip counts only if it reads back whole.
+    if (cv::VideoCapture written(partial.string());
+        !written.isOpened() || written.get(cv::CAP_PROP_FRAME_COUNT) != double(images.size()))
+        throw OutputError(partial.string() + ": cannot write (the clip does not read back whole)");
     fs::rename(partial, dir / "reference.mp4");
     if (args.trueMasks) writeTrueMasks(maskImages, big, size, scene.fps, dir / "true_masks");
     saveCamera(camera, dir / "camera.json");
@@ -350,8 +347,7 @@ int runSynth(const SynthArguments& args) {
         {"timings", {{"simulate_s", simulateSeconds}, {"render_s", renderSeconds}, {"encode_s", encodeSeconds},
                      {"total_s", secondsSince(start)}}},
         {"simulated_scene", sceneToJson(scene)}};
-    writeJsonFile(summary, dir / "synth.json.partial");
-    fs::rename(dir / "synth.json.partial", dir / "synth.json");
+    writeJsonAtomically(summary, dir / "synth.json");
     progress.report({{"event", "done"}, {"stage", "synth"}, {"video", (dir / "reference.mp4").string()},
                      {"simulate_s", simulateSeconds}, {"render_s", renderSeconds}, {"encode_s", encodeSeconds},
                      {"elapsed", secondsSince(start)}});

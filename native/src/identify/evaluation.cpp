@@ -124,7 +124,7 @@ nlohmann::json referenceSource(const Job& job) {
     return source;
 }
 
-void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>* cancel) {
+void prepareReference(Job& job, const fs::path& outDir) {
     if (!job.referenceDir.empty() || !job.video) return;
     const fs::path dir = outDir / "reference", sourceFile = dir / "source.json";
     // Silhouettes extracted from another video, plate or settings are extracted again, not reused.
@@ -133,8 +133,8 @@ void prepareReference(Job& job, const fs::path& outDir, const std::atomic<bool>*
     if (std::ifstream stream(sourceFile); stream) extractedFrom = nlohmann::json::parse(stream, nullptr, false);
     if (extractedFrom != source || !fs::exists(dir / "manifest.json")) {
         fs::remove_all(dir);
-        extractSilhouettes(*job.video, job.extraction, dir, {}, cancel);
-        std::ofstream(sourceFile) << source.dump(1) << "\n";
+        extractSilhouettes(*job.video, job.extraction, dir);
+        writeJsonAtomically(source, sourceFile);
     }
     job.referenceDir = dir;
     const ReferenceManifest reference = loadReferenceManifest(dir);

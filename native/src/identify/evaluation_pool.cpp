@@ -2,6 +2,7 @@
 // evaluation and a batch travel as between MPI ranks (cli/mpi_ranks.cpp).
 #include "identify/identify.h"
 
+#include <openvdb/Exceptions.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -108,6 +109,14 @@ BatchResult ThreadPool::evaluate(const Job& job, const Observations& observation
                                                            fieldsDir, batch.gridShift);
             } catch (const InputError&) {
                 throw;
+            } catch (const Cancelled&) {
+                throw;  // every evaluation in flight stops too: each polls the same request
+            } catch (const OutputError&) {
+                throw;  // a lost write stops the run: scored as a failed evaluation it would change the answer
+            } catch (const fs::filesystem_error&) {
+                throw;
+            } catch (const openvdb::IoError&) {
+                throw;  // the evaluation's own fields could not be read back
             } catch (const std::exception& e) {
                 Evaluation& failed = result.evaluations[k];
                 failed.theta = batch.thetas[k];

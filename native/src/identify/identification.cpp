@@ -84,17 +84,6 @@ const char* toString(StopReason reason) {
     return "?";
 }
 
-void writeJsonAtomically(const json& doc, const fs::path& file) {
-    const fs::path partial = file.string() + ".partial";
-    {
-        std::ofstream stream(partial, std::ios::trunc);
-        stream << doc.dump(1) << "\n";
-        stream.flush();
-        if (!stream) throw std::runtime_error(partial.string() + ": cannot write");
-    }
-    fs::rename(partial, file);  // atomic on POSIX: readers see the old or the new file, never half
-}
-
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -237,7 +226,7 @@ json fieldsOwner(const std::string& fingerprint, const Evaluation& ev, double gr
 
 // Makes `staged` (an evaluation's fields folder) OUT/fields.
 void promoteFields(const fs::path& staged, const json& owner, const fs::path& outDir) {
-    std::ofstream(staged / kFieldsOwner) << owner.dump(1) << "\n";
+    writeJsonAtomically(owner, staged / kFieldsOwner);
     fs::remove_all(outDir / kFieldsFolder);
     fs::rename(staged, outDir / kFieldsFolder);
 }
@@ -526,7 +515,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const auto sessionStart = Clock::now();
     fs::create_directories(outDir);
     Job job = jobIn;
-    prepareReference(job, outDir, options.cancel);
+    prepareReference(job, outDir);
     const Observations observations = observe(job);
     const Observation& obs = observations.full;
     const Observation& coarseObs = observations.coarse;
@@ -747,7 +736,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             batch.fieldsDirs.push_back(stagedFields(k));
         }
         const double gridShift = batch.gridShift;
-        const BatchResult ran = pool.evaluate(job, observations, batch);
+        const BatchResult ran = [&] {
+            try {
+                return pool.evaluate(job, observations, batch);
+            } catch (const Cancelled&) {
+                throw Cancelled("identification cancelled in generation " + std::to_string(es.generation() + 1) +
+                                "; a resume redoes it from the checkpoint");
+            }
+        }();
         const std::vector<Evaluation>& evals = ran.evaluations;
         const std::vector<std::string>& errors = ran.errors;
         if (g == 0 && job.hasSilhouettes()) {
@@ -881,8 +877,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             report.resumed = resumedFrom > 0 && done == resumedFrom + 1;
             options.onGeneration(report);
         }
-        if (!stop && options.cancel && *options.cancel) throw Cancelled("identification cancelled after generation " +
-                                                                        std::to_string(done) + "; checkpoint saved");
+        if (!stop && cancelRequested())
+            throw Cancelled("identification cancelled after generation " + std::to_string(done) + "; checkpoint saved");
     }
 
     // ---- Results.
@@ -1087,8 +1083,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                          {"seconds", std::chrono::duration<double>(Clock::now() - fieldsStart).count()}};
     }
     // Every evaluation as CSV for plotting.
-    {
-        std::ofstream csv(outDir / "evaluations.csv.partial");
+    writeFileAtomically(outDir / "evaluations.csv", [&](std::ostream& csv) {
         csv << "generation,fidelity,resolution,frames";
         for (const ParameterSpec& p : job.parameters) csv << "," << p.name();
         csv << ",E,seconds,origin\n";
@@ -1102,8 +1097,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             else csv << e.at("E").get<double>();
             csv << "," << e.at("seconds").get<double>() << "," << e.value("origin", "") << "\n";  // older checkpoints have none
         }
-    }
-    fs::rename(outDir / "evaluations.csv.partial", outDir / "evaluations.csv");
+    });
     result.seconds = elapsed;
     result.document = doc;
     writeJsonAtomically(doc, outDir / "result.json");

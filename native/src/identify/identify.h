@@ -263,7 +263,7 @@ struct Observation {
 // When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
 // job.extraction and points job.referenceDir there. A finished extraction is reused while
 // referenceSource(job), kept beside it as source.json, is unchanged.
-void prepareReference(Job& job, const std::filesystem::path& outDir, const std::atomic<bool>* cancel = nullptr);
+void prepareReference(Job& job, const std::filesystem::path& outDir);
 // What a video reference is extracted from: the video, clean plate and exclusion mask files (size,
 // time written) and the job's extraction settings with the engine's defaults filled in, so that
 // silhouettes from an engine with other defaults are not reused; null without a video.
@@ -474,16 +474,13 @@ struct IdentifyOptions {
     EvaluationPool* pool = nullptr;
     std::function<void(const GenerationReport&)> onGeneration;
     std::function<void(const std::string&)> onWarning;  // a result the user should doubt, and why
-    const std::atomic<bool>* cancel = nullptr;
     bool writeFields = true;  // θ*'s simulation, every frame as .vdb, into OUT/fields
 };
 
 // Runs (or resumes from OUT/checkpoint.json) the identification and writes OUT/result.json,
-// OUT/evaluations.csv. On cancel: finishes the current generation's evaluations, checkpoints and
-// throws Cancelled. A checkpoint of a different job throws InputError.
+// OUT/evaluations.csv. On a cancel request: abandons the evaluations in flight and throws Cancelled;
+// the checkpoint of the last finished generation stays, and a resume redoes the abandoned ones
+// (CMA-ES draws them again from its saved state). A checkpoint of a different job throws InputError.
 IdentificationResult identify(const Job& job, const std::filesystem::path& outDir, const IdentifyOptions& options = {});
-
-// Atomic JSON write: FILE.partial, fsync-free rename.
-void writeJsonAtomically(const nlohmann::json& doc, const std::filesystem::path& file);
 
 }  // namespace viscoscope::identify

@@ -219,8 +219,7 @@ public:
     void write(const fs::path& file) const {
         cv::Mat strip;
         if (!tiles_.empty()) cv::hconcat(tiles_, strip);
-        if (strip.empty() || !cv::imwrite(file.string(), strip))
-            throw std::runtime_error(file.string() + ": cannot write preview");
+        writeImage(strip, file);
     }
 
 private:
@@ -370,9 +369,7 @@ void writeManifest(const ReferenceManifest& m, const fs::path& file) {
                           {"exclude", m.excludeFile ? nlohmann::json(*m.excludeFile) : nlohmann::json()},
                           {"parameters", m.parameters}};
     if (fs::exists(file.parent_path() / "preview.png")) doc["preview"] = "preview.png";
-    std::ofstream stream(file);
-    stream << doc.dump(2) << "\n";
-    if (!stream) throw std::runtime_error(file.string() + ": cannot write");
+    writeJsonAtomically(doc, file);
 }
 
 }  // namespace
@@ -464,7 +461,7 @@ ExtractionOptions parseExtractionOptions(const nlohmann::json& doc, const std::s
 }
 
 ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOptions& options, const fs::path& outDir,
-                                     const ProgressCallback& progress, const std::atomic<bool>* cancel) {
+                                     const ProgressCallback& progress) {
     validateOptions(options);
     parseFrameWeights(options.weights, {});  // reports syntax errors before any work
     FrameSource frames(source, options.fps);
@@ -479,15 +476,14 @@ ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOpt
     ReferenceManifest manifest;
     cv::Mat frame;
     while (options.last < 0 || frames.nextIndex() <= options.last) {
-        if (cancel && *cancel) throw Cancelled("extraction cancelled");
+        throwIfCancelled("extraction");
         const int index = frames.nextIndex();
         const bool wanted = index >= options.first && (index - options.first) % options.step == 0;
         if (!(wanted ? frames.read(frame) : frames.skip())) break;
         if (!wanted) continue;
         const cv::Mat1b mask = extractor.extract(frame, excluded);
         const std::string name = maskName(index);
-        if (!cv::imwrite((output.staged("masks") / fs::path(name).filename()).string(), mask))
-            throw std::runtime_error(outDir.string() + ": cannot write " + name);
+        writeImage(mask, output.staged("masks") / fs::path(name).filename());
         preview.offer(index, frame, mask);
         manifest.frames.push_back(index);
         manifest.times.push_back(index / frames.fps());
@@ -505,7 +501,7 @@ ReferenceManifest extractSilhouettes(const fs::path& source, const ExtractionOpt
     manifest.parameters = extractionParameters(options);
     std::vector<std::string> outputs{"masks", "preview.png"};
     if (!excluded.empty()) {
-        cv::imwrite(output.staged("exclude.png").string(), excluded);
+        writeImage(excluded, output.staged("exclude.png"));
         manifest.excludeFile = "exclude.png";
         outputs.push_back("exclude.png");
     }

@@ -22,18 +22,16 @@
 
 namespace viscoscope {
 
-// A long operation stopped because its cancel flag was raised. The CLI maps it to exit code 3.
-class Cancelled : public std::runtime_error {
-public:
-    using std::runtime_error::runtime_error;
-};
-
 // ---------------------------------------------------------------------------------------------
 // Light as a sensor adds it. A pixel's footprint mixes colours in linear light, while video and
 // renders store them sRGB-encoded; averaging and coverage estimates convert first.
 
 cv::Mat srgbToLinear(const cv::Mat& image);  // 8-bit sRGB → float in [0, 1], same channels
 cv::Mat linearToSrgb(const cv::Mat& image);  // float in [0, 1] → 8-bit sRGB, rounded
+
+// Encodes `image` in the format of `file`'s extension and writes it whole or not at all (OpenCV's
+// imwrite does not report a full disk). Throws OutputError.
+void writeImage(const cv::Mat& image, const std::filesystem::path& file);
 
 // ---------------------------------------------------------------------------------------------
 // Reference extraction (`viscoscope extract`)
@@ -110,10 +108,9 @@ using ProgressCallback = std::function<void(int done, int total)>;
 // of numbered images) and writes outDir/masks/mask_%05d.png, outDir/exclude.png (when there is
 // an exclusion), outDir/preview.png and, last, outDir/manifest.json. Outputs go to temporary
 // names first, so a failed or cancelled run never leaves a complete-looking manifest.
-// Throws InputError for bad input and Cancelled when *cancel becomes true.
+// Throws InputError for bad input and Cancelled once a cancel is requested.
 ReferenceManifest extractSilhouettes(const std::filesystem::path& source, const ExtractionOptions& options,
-                                     const std::filesystem::path& outDir, const ProgressCallback& progress = {},
-                                     const std::atomic<bool>* cancel = nullptr);
+                                     const std::filesystem::path& outDir, const ProgressCallback& progress = {});
 
 ReferenceManifest loadReferenceManifest(const std::filesystem::path& directory);
 // Writes `manifest` as directory/manifest.json (the masks it names must be there already), for

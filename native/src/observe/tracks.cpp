@@ -77,16 +77,16 @@ ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file) {
 }
 
 void saveScalarTrackCsv(const ScalarTrack& track, const std::filesystem::path& file) {
-    std::ofstream stream(file);
-    if (!stream) throw InputError(file.string() + ": cannot write scalar-track CSV");
-    stream << "time_s";
-    for (const std::string& column : track.columns) stream << "," << column;
-    stream << "\n" << std::setprecision(10);
-    for (size_t i = 0; i < track.time.size(); ++i) {
-        stream << track.time[i];
-        for (const std::vector<double>& column : track.values) stream << "," << column[i];
-        stream << "\n";
-    }
+    writeFileAtomically(file, [&](std::ostream& stream) {
+        stream << "time_s";
+        for (const std::string& column : track.columns) stream << "," << column;
+        stream << "\n" << std::setprecision(10);
+        for (size_t i = 0; i < track.time.size(); ++i) {
+            stream << track.time[i];
+            for (const std::vector<double>& column : track.values) stream << "," << column[i];
+            stream << "\n";
+        }
+    });
 }
 
 namespace {

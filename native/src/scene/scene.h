@@ -8,6 +8,7 @@
 
 #include <array>
 #include <filesystem>
+#include <functional>
 #include <iosfwd>
 #include <optional>
 #include <stdexcept>
@@ -22,6 +23,29 @@ class InputError : public std::runtime_error {
 public:
     using std::runtime_error::runtime_error;
 };
+
+// A file the engine could not write (disk full, no permission, a folder in its place). The CLI maps
+// it to exit 1; an identification stops on it rather than scoring around the lost evaluation.
+class OutputError : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// A long operation stopped because a cancel was requested. The CLI maps it to exit code 3.
+class Cancelled : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
+};
+
+// A cancel is a request to the whole process (the CLI raises it on SIGINT and SIGTERM), so it is one
+// flag that every long loop at every stage polls (a simulation step, a solver iteration, a
+// voxelisation, an extraction frame), not a pointer threaded through the simulation, its solver, the
+// hole calibration and OpenVDB's voxeliser. requestCancel is async-signal-safe.
+void requestCancel() noexcept;
+void withdrawCancel() noexcept;  // for a test that cancels and goes on in the same process
+bool cancelRequested() noexcept;
+// Throws Cancelled("WHAT cancelled") once a cancel was requested.
+void throwIfCancelled(const char* what);
 
 using Vec3 = Eigen::Vector3d;
 
@@ -208,6 +232,15 @@ double parameterValue(const Scene& scene, const SceneParameter& parameter);
 void setParameter(Scene& scene, const SceneParameter& parameter, double value);
 // "must be in [lower, upper] UNIT, got VALUE", or empty when `value` lies within the bounds.
 std::string boundsProblem(const ParameterDeclaration& declaration, double value);
+
+// ---------------------------------------------------------------------------------------------
+// Writing the engine's files: whole or not at all.
+
+// `write` fills FILE.partial, which is flushed, closed and checked, then renamed over `file`, so a
+// reader (or a run resumed after a kill) sees the old file or the new one, never half of one.
+// Throws OutputError("PATH: cannot write (REASON)") and leaves no .partial behind.
+void writeFileAtomically(const std::filesystem::path& file, const std::function<void(std::ostream&)>& write);
+void writeJsonAtomically(const nlohmann::json& doc, const std::filesystem::path& file);
 
 // ---------------------------------------------------------------------------------------------
 // Reading the engine's JSON files strictly.

@@ -921,6 +921,7 @@ double Simulation::stableTimeStep() const {
 }
 
 StepStats Simulation::step(double dt) {
+    throwIfCancelled("simulation");
     StepStats stats;
     stats.dt = dt;
     auto t0 = Clock::now();

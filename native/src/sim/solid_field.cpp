@@ -52,6 +52,11 @@ struct PrimitiveDistance {
     double operator()(const ChannelSolid& c) const { return 0.5 * c.width - std::abs(x.y() - c.centerY); }
 };
 
+// OpenVDB's voxeliser polls this between its passes and stops on a cancel request.
+struct CancelRequest : openvdb::util::NullInterrupter {
+    bool wasInterrupted(int = -1) override { return cancelRequested(); }
+};
+
 }  // namespace
 
 SolidField::SolidField(const std::vector<Solid>& solids, const Grid& grid) : grid_(grid) {
@@ -66,8 +71,10 @@ SolidField::SolidField(const std::vector<Solid>& solids, const Grid& grid) : gri
             // Half the simulation cell resolves the solid finely enough for the fraction sampling.
             auto transform = openvdb::math::Transform::createLinearTransform(grid.dx * 0.5);
             std::vector<openvdb::Vec4I> quads;
+            CancelRequest cancel;
             meshes_.push_back(openvdb::tools::meshToLevelSet<openvdb::FloatGrid>(
-                *transform, points, triangles, quads, 4.0f));
+                cancel, *transform, points, triangles, quads, 4.0f));
+            throwIfCancelled("voxelising the mesh");  // an interrupted voxelisation returns a partial grid
         } else {
             solids_.push_back(solid);
         }

@@ -1,5 +1,7 @@
 #include "sim/stokes_solver.h"
 
+#include "scene/scene.h"
+
 #include <Eigen/SparseCore>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -223,6 +225,7 @@ CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, c
     Vec p = z;
     double rz = dot(r, z);
     for (; result.iterations < maxIterations; ++result.iterations) {
+        throwIfCancelled("the pressure–viscosity solve");  // a large solve runs for seconds
         result.residual = std::sqrt(dot(r, r)) / bNorm;
         if (result.residual <= tolerance) break;
         apply(p, ap);

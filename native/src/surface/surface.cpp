@@ -2,6 +2,7 @@
 
 #include "scene/scene.h"
 
+#include <openvdb/io/Archive.h>
 #include <openvdb/tools/Dense.h>
 #include <openvdb/tools/Prune.h>
 #include <openvdb/tools/VolumeToMesh.h>
@@ -21,6 +22,16 @@ openvdb::math::Transform::Ptr cellCentredTransform(const sim::Grid& grid) {
     transform->postTranslate(openvdb::Vec3d(centre.x(), centre.y(), centre.z()));
     return transform;
 }
+
+// openvdb::io::File writes through a stream of its own and never checks it, so a full disk leaves a
+// truncated .vdb behind without an error. This writes the same seekable file format (File's) into a
+// stream the caller checks.
+class VdbFileWriter : public openvdb::io::Archive {
+public:
+    void write(std::ostream& out, const openvdb::GridPtrVec& grids) const {
+        openvdb::io::Archive::write(out, grids, /*seekable=*/true);
+    }
+};
 
 }  // namespace
 
@@ -159,27 +170,25 @@ void writeFrameVdb(const std::filesystem::path& file, const sim::Simulation& sim
         vAccess.setValue(coord, openvdb::Vec3f(v.x(), v.y(), v.z()));
         pAccess.setValue(coord, static_cast<float>(simulation.cellPressure(c)));
     }
-    openvdb::GridPtrVec grids{levelSet, velocity, pressure};
-    openvdb::io::File out(file.string());
-    out.write(grids);
-    out.close();
+    const openvdb::GridPtrVec grids{levelSet, velocity, pressure};
+    writeFileAtomically(file, [&](std::ostream& out) { VdbFileWriter().write(out, grids); });
 }
 
 void writeParticles(const std::filesystem::path& file, const sim::Particles& particles) {
-    std::ofstream out(file, std::ios::binary);
-    if (!out) throw std::runtime_error("cannot write " + file.string());
     const uint32_t version = 1;
     const uint64_t count = particles.position.size();
-    out.write("VSCP", 4);
-    out.write(reinterpret_cast<const char*>(&version), sizeof version);
-    out.write(reinterpret_cast<const char*>(&count), sizeof count);
     std::vector<float> record(6 * count);
     for (size_t p = 0; p < count; ++p)
         for (int a = 0; a < 3; ++a) {
             record[6 * p + a] = static_cast<float>(particles.position[p][a]);
             record[6 * p + 3 + a] = static_cast<float>(particles.velocity[p][a]);
         }
-    out.write(reinterpret_cast<const char*>(record.data()), std::streamsize(record.size() * sizeof(float)));
+    writeFileAtomically(file, [&](std::ostream& out) {
+        out.write("VSCP", 4);
+        out.write(reinterpret_cast<const char*>(&version), sizeof version);
+        out.write(reinterpret_cast<const char*>(&count), sizeof count);
+        out.write(reinterpret_cast<const char*>(record.data()), std::streamsize(record.size() * sizeof(float)));
+    });
 }
 
 sim::Particles readParticles(const std::filesystem::path& file) {
@@ -215,11 +224,10 @@ void writeObj(const std::filesystem::path& file, const std::vector<openvdb::Vec3
 }
 
 void writeObj(const std::filesystem::path& file, const TriangleMesh& mesh) {
-    std::ofstream out(file);
-    if (!out) throw std::runtime_error("cannot write " + file.string());
-    for (const auto& p : mesh.vertices) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
-    for (const auto& t : mesh.triangles) out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
-    if (!out) throw std::runtime_error("cannot write " + file.string());
+    writeFileAtomically(file, [&](std::ostream& out) {
+        for (const auto& p : mesh.vertices) out << "v " << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+        for (const auto& t : mesh.triangles) out << "f " << t[0] + 1 << ' ' << t[1] + 1 << ' ' << t[2] + 1 << '\n';
+    });
 }
 
 }  // namespace viscoscope::surface
