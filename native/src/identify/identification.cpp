@@ -167,6 +167,35 @@ void requireCameraSeesLiquid(const Job& job, int resolution) {
                          " image or lie behind the camera)");
 }
 
+// The first generation showed no liquid in any compared frame, though the camera sees the liquid at
+// the start (requireCameraSeesLiquid): the cause lies in when the frames are compared or in θ's
+// range more often than in the camera, so the message says what was compared.
+std::string noSimulatedLiquidSeen(const Job& job, const Observation& obs, const std::vector<std::vector<double>>& thetas) {
+    std::ostringstream text;
+    text << std::setprecision(3) << job.file.string() << ": no simulated liquid shows in any compared frame for any θ"
+         << " of the first generation (";
+    for (size_t i = 0; i < job.parameters.size(); ++i) {
+        double lo = INFINITY, hi = -INFINITY;
+        for (const std::vector<double>& theta : thetas) lo = std::min(lo, theta[i]), hi = std::max(hi, theta[i]);
+        text << (i ? ", " : "") << job.parameters[i].name() << " " << lo << "–" << hi;
+    }
+    text << "), though the camera sees the liquid at the start";
+    std::vector<size_t> compared;
+    for (size_t i = 0; i < obs.simFrames.size(); ++i)
+        if (obs.simFrames[i] >= 0) compared.push_back(i);
+    if (!compared.empty()) {
+        const size_t first = compared.front(), last = compared.back();
+        text << ": the clip's times " << obs.reference.times[first] << "–" << obs.reference.times[last] << " s at "
+             << obs.reference.fps << " fps, with time_offset_s " << job.timeOffset << ", were compared with simulation"
+             << " frames " << obs.simFrames[first] << "–" << obs.simFrames[last] << " at " << job.scene.fps << " fps";
+    }
+    const int pixels = job.camera.width * job.camera.height;
+    const int comparedPixels = obs.compared.empty() ? pixels : cv::countNonZero(obs.compared);
+    text << ", in " << comparedPixels << " of the image's " << pixels << " pixels (the rest excluded: the "
+         << "container, ground_band, the background); check time_offset_s, the clip's fps, ground_band and the "
+         << "parameters' bounds, then the camera";
+    return text.str();
+}
 
 // The alignment check. The grid resolves a scene's small features unevenly: the sample cup's hole
 // is 2.4 cells in radius at 48³, and where the faces fall against its rim decides how much of it passes
@@ -749,9 +778,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         if (g == 0 && job.hasSilhouettes()) {
             double pixels = 0;
             for (const Evaluation& e : evals) pixels += e.simulatedPixels;
-            if (pixels == 0)
-                throw InputError(job.cameraFile.string() + ": the camera sees no simulated liquid in any compared "
-                                                           "frame for any θ of the first generation");
+            if (pixels == 0) throw InputError(noSimulatedLiquidSeen(job, batch.coarse ? coarseObs : obs, batch.thetas));
         }
         std::vector<double> fitness(xs.size());
         int bestK = 0;
