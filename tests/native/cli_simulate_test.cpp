@@ -95,6 +95,16 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
         EXPECT_FALSE(fs::exists(dir_ / "out/simulation.json"));
     }
+    {  // a hole far narrower than a cell, which the hole calibration's box cannot hold: the message
+       // names the scene's cup and field, not the calibration's own box (after the resolution warning)
+        json scene = smallScene();
+        scene["solids"][1]["hole_radius"] = 1e-4;
+        const CommandResult r = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+        EXPECT_EQ(r.exitCode, 2) << r.err;
+        EXPECT_NE(r.err.find("viscoscope: scene.json: solids[1] (cup): its hole (hole_radius 0.0001 m, 0.0178 cells "
+                             "across at resolution 16) is too small for the grid to calibrate its drain"),
+                  std::string::npos) << r.err;
+    }
     // An empty domain: the liquid box lies entirely inside a solid.
     json scene = smallScene();
     scene["liquids"] = json::array({{{"type", "box"}, {"min", {-0.05, -0.05, -0.01}}, {"max", {0.05, 0.05, 0.0}}}});

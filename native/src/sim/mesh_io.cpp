@@ -15,6 +15,11 @@ namespace {
     throw InputError(file.string() + ": " + problem);
 }
 
+// Reading a mesh of millions of faces takes seconds: a cancel is polled every 65536 lines or elements.
+void pollCancel(long long count) {
+    if ((count & 0xFFFF) == 0) throwIfCancelled("reading the mesh");
+}
+
 void addPolygon(TriangleMesh& mesh, const std::vector<long long>& polygon, const std::filesystem::path& file) {
     if (polygon.size() < 3) fail(file, "a face has fewer than 3 vertices");
     for (long long index : polygon)
@@ -29,7 +34,8 @@ TriangleMesh loadObj(const std::filesystem::path& file) {
     if (!stream) fail(file, "cannot open mesh");
     TriangleMesh mesh;
     std::string line;
-    while (std::getline(stream, line)) {
+    for (long long lines = 1; std::getline(stream, line); ++lines) {
+        pollCancel(lines);
         std::istringstream in(line);
         std::string tag;
         in >> tag;
@@ -143,6 +149,7 @@ std::vector<PlyElement> readPlyHeader(std::istream& stream, bool& binary, const 
 
 void readPlyVertices(const PlyElement& element, PlyValueReader& reader, TriangleMesh& mesh) {
     for (long long i = 0; i < element.count; ++i) {
+        pollCancel(i);
         Eigen::Vector3d v = Eigen::Vector3d::Zero();
         for (const PlyProperty& property : element.properties) {
             const double value = reader.read(property.type);
@@ -157,6 +164,7 @@ void readPlyVertices(const PlyElement& element, PlyValueReader& reader, Triangle
 void readPlyFaces(const PlyElement& element, PlyValueReader& reader, TriangleMesh& mesh,
                   const std::filesystem::path& file) {
     for (long long i = 0; i < element.count; ++i) {
+        pollCancel(i);
         std::vector<long long> polygon;
         for (const PlyProperty& property : element.properties) {
             if (property.countType.empty()) {

@@ -16,12 +16,20 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iomanip>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
 namespace viscoscope::sim {
 
 namespace {
+
+// The set-up's loops over every cell take seconds at 128³ around a mesh solid: they poll a cancel
+// once a z-slab.
+void pollCancelEachSlab(const Lattice& cells, int c, const char* what) {
+    if (c % (cells.size[0] * cells.size[1]) == 0) throwIfCancelled(what);
+}
 
 // Particle radius and kernel reach (in cells) of the liquid's distance field (Zhu & Bridson 2005).
 // The radius is set so that a seeded block of liquid measures its true volume (within 1 % at 16
@@ -210,14 +218,17 @@ Simulation::Simulation(const Scene& scene)
         validFace_[a].assign(fractions_.face[a].lattice.count(), 0);
     }
     cellSolidDistance_.resize(cells.count());
-    for (int c = 0; c < cells.count(); ++c)
+    for (int c = 0; c < cells.count(); ++c) {
+        pollCancelEachSlab(cells, c, "sampling the solids");
         cellSolidDistance_[c] = solids_->distance(grid_.position(kCellCentre, cells.coords(c)));
+    }
 
     // Non-solid fraction of every half-cell: the one sub-cell sampling all control volumes share.
     const Vec3i fine = 2 * grid_.cells;
     const double h = 0.5 * grid_.dx;
     fineSolidFraction_.resize(size_t(fine[0]) * fine[1] * fine[2]);
     tbb::parallel_for(0, fine[2], [&](int k) {
+        throwIfCancelled("sampling the solids");
         for (int j = 0; j < fine[1]; ++j)
             for (int i = 0; i < fine[0]; ++i) {
                 const Vec3 x = grid_.origin + h * Vec3(i + 0.5, j + 0.5, k + 0.5);
@@ -228,7 +239,18 @@ Simulation::Simulation(const Scene& scene)
     if (scene.solver.holeConductance == HoleConductance::Dagan)
         for (size_t i = 0; i < scene.solids.size(); ++i)
             if (const auto* cup = std::get_if<CupSolid>(&scene.solids[i]); cup && cup->holeRadius > 0) {
-                HoleCalibration calibration = calibrateHole(*cup, grid_, scene.solver);
+                HoleCalibration calibration;
+                try {
+                    calibration = calibrateHole(*cup, grid_, scene.solver);
+                } catch (const InputError&) {  // its box, a few hole radii wide, holds no liquid cell
+                    std::ostringstream text;
+                    text << std::setprecision(3) << scene.sourceFile.filename().string() << ": solids[" << i
+                         << "] (cup): its hole (hole_radius " << cup->holeRadius << " m, "
+                         << 2 * cup->holeRadius / grid_.dx << " cells across at resolution " << scene.domain.resolution
+                         << ") is too small for the grid to calibrate its drain; raise the resolution or hole_radius, "
+                         << "or set hole_radius 0 for a cup without a hole";
+                    throw InputError(text.str());
+                }
                 calibration.solid = static_cast<int>(i);
                 setHoleResistance(*cup, calibration.resistance);
                 holeCalibrations_.push_back(calibration);
@@ -405,6 +427,7 @@ void Simulation::seedParticles() {
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const Lattice cells = grid_.lattice(kCellCentre);
     for (int c = 0; c < cells.count(); ++c) {
+        pollCancelEachSlab(cells, c, "seeding the liquid");
         const Vec3i ijk = cells.coords(c);
         for (int s = 0; s < perCell; ++s) {
             // Jittered stratified seeding: one particle per sub-cell, at a random point in it.
