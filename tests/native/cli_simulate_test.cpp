@@ -71,6 +71,23 @@ TEST_F(SimulateCommand, WritesEveryFrameAndASummary) {
     std::ifstream(dir_ / "out/simulation.json") >> summary;
     EXPECT_EQ(summary["frames"].size(), 2u);
     EXPECT_LT(std::abs(summary["volume_drift"].get<double>()), 0.05);
+    EXPECT_EQ(summary["warnings"], json::array());
+}
+
+// A run whose result is probably wrong says so, on stderr and in simulation.json: here one solver
+// iteration a step leaves every solve short of its tolerance, and the liquid loses a third of its volume.
+TEST_F(SimulateCommand, ARunThatStopsConvergingOrLosesItsLiquidSaysSo) {
+    json scene = smallScene();
+    scene["frames"] = 4;
+    scene["solver"]["max_iterations"] = 1;
+    const CommandResult r = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.err.find("warning: frame 1: the pressure–viscosity solve stopped at solver.max_iterations"),
+              std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("% of its volume (it left the domain or went into a solid)"), std::string::npos) << r.err;
+    const json warnings = json::parse(viscoscope::cli_test::slurp(dir_ / "out/simulation.json")).at("warnings");
+    ASSERT_EQ(warnings.size(), 3u) << warnings;
+    EXPECT_EQ(warnings[2], "4 frames had a solve stopped short of its tolerance");
 }
 
 TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
