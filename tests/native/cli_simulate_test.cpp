@@ -122,6 +122,25 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
                              "across at resolution 16) is too small for the grid to calibrate its drain"),
                   std::string::npos) << r.err;
     }
+    {  // a solid in another unit: a 10 cm cube exported in millimetres, refused before its voxelisation,
+       // and a cup or liquid that misses the domain
+        std::ofstream obj(dir_ / "cube_mm.obj");
+        for (int v = 0; v < 8; ++v) obj << "v " << 100 * (v & 1) << " " << 100 * (v >> 1 & 1) << " " << 100 * (v >> 2) << "\n";
+        obj << "f 1 2 4\nf 1 4 3\nf 5 7 8\nf 5 8 6\nf 1 5 6\nf 1 6 2\nf 3 4 8\nf 3 8 7\nf 1 3 7\nf 1 7 5\nf 2 6 8\nf 2 8 4\n";
+        obj.close();
+        json scene = smallScene();
+        scene["solids"].push_back({{"type", "mesh"}, {"path", "cube_mm.obj"}});
+        const CommandResult mesh = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+        EXPECT_EQ(mesh.exitCode, 2) << mesh.err;
+        EXPECT_NE(mesh.err.find("solids[2] (mesh) "), std::string::npos) << mesh.err;
+        EXPECT_NE(mesh.err.find("times the domain's size; is it in millimetres? Scale it to metres"), std::string::npos) << mesh.err;
+        scene = smallScene();
+        scene["solids"][1]["position"] = {0, 0, 5};
+        const CommandResult cup = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+        EXPECT_EQ(cup.exitCode, 2) << cup.err;
+        EXPECT_NE(cup.err.find("scene.json.solids[1].position: lies outside the domain ([-0.09, -0.09, 0] to "
+                               "[0.09, 0.09, 0.18] m); is it in another unit?"), std::string::npos) << cup.err;
+    }
     // An empty domain: the liquid box lies entirely inside a solid.
     json scene = smallScene();
     scene["liquids"] = json::array({{{"type", "box"}, {"min", {-0.05, -0.05, -0.01}}, {"max", {0.05, 0.05, 0.0}}}});

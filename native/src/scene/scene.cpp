@@ -124,6 +124,36 @@ void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
     if (!(lo.array() < hi.array()).all()) r.fail("max", "must be greater than min on every axis");
 }
 
+// A cup, box or liquid that misses the domain, or a cup wider than it, is a mistake (most often a
+// unit: millimetres for metres), not a scene: it is refused with the field named, before the
+// simulation spends minutes finding the domain empty.
+std::string domainExtent(const Domain& d) {
+    return "[" + FieldReader::format(d.min.x()) + ", " + FieldReader::format(d.min.y()) + ", " +
+           FieldReader::format(d.min.z()) + "] to [" + FieldReader::format(d.max.x()) + ", " +
+           FieldReader::format(d.max.y()) + ", " + FieldReader::format(d.max.z()) + "] m";
+}
+
+void requireBoxMeetsDomain(const FieldReader& r, const std::string& field, const Vec3& lo, const Vec3& hi,
+                           const Domain& d) {
+    if ((hi.array() < d.min.array()).any() || (lo.array() > d.max.array()).any())
+        r.fail(field, "lies outside the domain (" + domainExtent(d) + "); is it in another unit?");
+}
+
+void requireInDomain(const FieldReader& r, const Solid& solid, const Domain& d) {
+    if (const auto* cup = std::get_if<CupSolid>(&solid)) {
+        const double outer = cup->innerRadius + cup->wallThickness;
+        const double across = 2 * outer, domainSide = (d.max - d.min).maxCoeff();
+        if (across > domainSide)
+            r.fail("inner_radius", "the cup is " + FieldReader::format(across) + " m across, wider than the domain's " +
+                                       "longest side (" + FieldReader::format(domainSide) + " m); is it in another unit?");
+        const Vec3 lo = cup->position - Vec3(outer, outer, 0);
+        const Vec3 hi = cup->position + Vec3(outer, outer, cup->bottomThickness + cup->height);
+        requireBoxMeetsDomain(r, "position", lo, hi, d);
+    } else if (const auto* box = std::get_if<BoxSolid>(&solid)) {
+        requireBoxMeetsDomain(r, "min", box->min, box->max, d);
+    }
+}
+
 Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
     const std::string type = r.string("type");
     if (type == "ground") return GroundSolid{r.number("height", 0.0)};
@@ -297,6 +327,7 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
         for (size_t i = 0; i < solids.size(); ++i) {
             const FieldReader solid(solids[i], root.where("solids[" + std::to_string(i) + "]"));
             scene.solids.push_back(parseSolid(solid, baseDir));
+            requireInDomain(solid, scene.solids.back(), scene.domain);
             if (solid.boolean("transparent", false)) scene.transparentSolids.push_back(i);
             solid.finish();
         }
@@ -307,6 +338,10 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     for (size_t i = 0; i < liquids.size(); ++i) {
         const FieldReader liquid(liquids[i], root.where("liquids[" + std::to_string(i) + "]"));
         scene.liquids.push_back(parseLiquid(liquid, scene.solids));
+        if (const auto* box = std::get_if<LiquidBox>(&scene.liquids.back()))
+            requireBoxMeetsDomain(liquid, "min", box->min, box->max, scene.domain);
+        else if (const auto* emitter = std::get_if<DiscEmitter>(&scene.liquids.back()))
+            requireBoxMeetsDomain(liquid, "center", emitter->center, emitter->center, scene.domain);
         liquid.finish();
     }
 

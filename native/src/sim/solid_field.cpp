@@ -6,6 +6,7 @@
 #include <openvdb/tools/MeshToVolume.h>
 
 #include <algorithm>
+#include <sstream>
 
 namespace viscoscope::sim {
 
@@ -52,6 +53,28 @@ struct PrimitiveDistance {
     double operator()(const ChannelSolid& c) const { return 0.5 * c.width - std::abs(x.y() - c.centerY); }
 };
 
+// A mesh exported in another unit (millimetres for metres) misses the domain or dwarfs it, and its
+// voxelisation at the cell size would take minutes and gigabytes before the scene turned out empty:
+// it is refused first. Only its part in the domain matters, so a large one can be cropped to it.
+constexpr double kMaxMeshOverDomain = 100;
+
+void requireMeshFitsDomain(const TriangleMesh& mesh, const std::filesystem::path& path, size_t index,
+                           const Grid& grid) {
+    Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
+    for (const Vec3& v : mesh.vertices) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+    const Vec3 domainLo = grid.origin, domainHi = grid.origin + grid.extent();
+    const std::string where = "solids[" + std::to_string(index) + "] (mesh) " + path.string();
+    std::ostringstream bounds;
+    bounds << "[" << lo.x() << ", " << lo.y() << ", " << lo.z() << "] to [" << hi.x() << ", " << hi.y() << ", "
+           << hi.z() << "]";
+    if ((hi.array() < domainLo.array()).any() || (lo.array() > domainHi.array()).any())
+        throw InputError(where + ": its bounds " + bounds.str() + " lie outside the domain; is it in another unit?");
+    const double ratio = (hi - lo).maxCoeff() / grid.extent().maxCoeff();
+    if (ratio > kMaxMeshOverDomain)
+        throw InputError(where + ": its bounds " + bounds.str() + " are " + std::to_string(int(ratio)) +
+                         " times the domain's size; is it in millimetres? Scale it to metres, or crop it to the domain");
+}
+
 // OpenVDB's voxeliser polls this between its passes and stops on a cancel request.
 struct CancelRequest : openvdb::util::NullInterrupter {
     bool wasInterrupted(int = -1) override { return cancelRequested(); }
@@ -61,9 +84,11 @@ struct CancelRequest : openvdb::util::NullInterrupter {
 
 SolidField::SolidField(const std::vector<Solid>& solids, const Grid& grid) : grid_(grid) {
     openvdb::initialize();
-    for (const Solid& solid : solids) {
+    for (size_t i = 0; i < solids.size(); ++i) {
+        const Solid& solid = solids[i];
         if (const auto* mesh = std::get_if<MeshSolid>(&solid)) {
             const TriangleMesh loaded = loadMesh(mesh->path);
+            requireMeshFitsDomain(loaded, mesh->path, i, grid);
             std::vector<openvdb::Vec3s> points;
             std::vector<openvdb::Vec3I> triangles;
             for (const Eigen::Vector3d& v : loaded.vertices) points.emplace_back(v.x(), v.y(), v.z());
