@@ -21,6 +21,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <unistd.h>
+
 namespace viscoscope::sim {
 
 namespace {
@@ -176,6 +178,26 @@ bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, 
 // (tests/bench/ground_offset.py, η = 1, 48 cells) spreads as on 96 with the ground 0–0.4 cell above
 // the face below (rms radius within 0.4 %), but 5 % / 4 % / 2 % less at ½ / 0.55 / ⅔, where the
 // lowest x- and y-faces lie in the ground and are shut: the bulk's error is not the cup's foot's.
+// Peak memory of a run, measured on the sample cup (tests/bench/FINDINGS.md): the process itself,
+// then the per-cell fields, sub-cell solid fractions and particles of a partly filled domain.
+constexpr double kBaseBytes = 110e6;
+constexpr double kBytesPerCell = 470;
+
+// A grid that cannot fit in this machine's memory is refused before anything is allocated, rather
+// than failing with bad_alloc (or the kernel's OOM killer) part way through.
+void requireMemoryFor(const Scene& scene, const Grid& grid) {
+    const double cells = double(grid.cells[0]) * grid.cells[1] * grid.cells[2];
+    const double needed = kBaseBytes + kBytesPerCell * cells;
+    const double available = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+    if (available > 0 && needed > available) {
+        std::ostringstream text;
+        text << std::setprecision(3) << scene.sourceFile.filename().string() << ": domain.resolution "
+             << scene.domain.resolution << ": " << cells << " cells need about " << needed / 1e9
+             << " GB, more than this machine's " << available / 1e9 << " GB; lower the resolution";
+        throw InputError(text.str());
+    }
+}
+
 Grid sceneGrid(const Scene& scene) {
     Grid grid;
     grid.origin = scene.domain.min;
@@ -198,6 +220,7 @@ Grid sceneGrid(const Scene& scene) {
 
 Simulation::Simulation(const Scene& scene)
     : scene_(scene), grid_(sceneGrid(scene)), random_(scene.seed) {
+    requireMemoryFor(scene, grid_);
     solids_ = std::make_unique<SolidField>(scene.solids, grid_);
     material_ = std::make_unique<MaterialLaw>(scene.material);
     solver_ = makeSolver(scene.solver.scheme == StokesScheme::Unified);
