@@ -226,6 +226,10 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         else if (track.is_object() && track.contains("csv") && track.at("csv").is_string()) {
             if (track.contains("observable")) {
                 job.measuredTrack = parseMeasuredTrack(track, where, baseDir);
+                const Domain& d = job.scene.domain;  // where the lab measured from is a point of the scene
+                if ((job.measuredTrack->origin.array() < d.min.array()).any() ||
+                    (job.measuredTrack->origin.array() > d.max.array()).any())
+                    throw InputError(where + ".origin: lies outside the scene's domain; is it in another unit?");
             } else {
                 rejectUnknownKeys(track, {"csv", "weight"}, where + ".");
                 job.trackCsv = resolve(baseDir, track.at("csv").get<std::string>());
