@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -256,6 +257,14 @@ TEST_F(CliObserve, BadVideosExitTwoWithOneLine) {
     expectBadInput(run("extract " + (dir_ / "corrupt.mp4").string() + outArgs), out);
 
     expectBadInput(run("extract " + makeVideo("empty.mp4", 0).string() + outArgs), out);
+
+    // A named pipe would block the video's open until a writer came (the probe's hang); the time
+    // limit keeps a regression from hanging the suite.
+    ASSERT_EQ(::mkfifo((dir_ / "pipe.mp4").c_str(), 0600), 0);
+    expectBadInput(viscoscope::cli_test::runCommand("timeout -s KILL 60 " + std::string(VISCOSCOPE_CLI) + " extract " +
+                                                        (dir_ / "pipe.mp4").string() + outArgs,
+                                                    dir_),
+                   out);
 
     const fs::path video = makeVideo("short.mp4", 8);
     expectBadInput(run("extract " + video.string() + outArgs + " --background-frames 2 --first 20"), out);

@@ -53,6 +53,9 @@ FrameSource::FrameSource(const std::filesystem::path& source, std::optional<doub
         if (images_.empty()) throw InputError(source.string() + ": folder holds no images");
         frameCount_ = static_cast<int>(images_.size());
     } else {
+        // A FIFO or a device would block FFmpeg's open until something writes to it, past any cancel.
+        if (!std::filesystem::is_regular_file(source))
+            throw InputError(source.string() + ": not a video file (a pipe, device or socket)");
         // FFmpeg logs its own complaints about corrupt files to stderr, which would break the CLI's
         // one-line error; quiet it unless the user asked for a log level.
         setenv("OPENCV_FFMPEG_LOGLEVEL", "-8", /*overwrite=*/0);
