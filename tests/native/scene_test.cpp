@@ -114,6 +114,18 @@ TEST(Scene, BadFieldsAreNamed) {
         {"/material/model", json{{"type", "power_law"}, {"consistency", 3}, {"index", 0.5}}, "scene.json.material.model.flow_index: missing"},
         {"/material/model", json{{"type", "power_law"}, {"consistency", 3}, {"flow_index", 0.5}, {"colour", 1}},
          "scene.json.material.model.colour: unknown field"},
+        // Runaway values and other units: refused, not run for hours or in an empty domain.
+        {"/fps", 1e-9, "scene.json.fps: must be in [0.001, 1e+06] frames/s, got 1e-09"},
+        {"/solver/cfl", 1e-6, "scene.json.solver.cfl: must be in [0.01, 10] cells a step, got 1e-06"},
+        {"/gravity", json::array({0, 0, -1e300}), "scene.json.gravity: must be at most 1000 m/s² long (9.81 on Earth), "
+                                                  "got 1e+300"},
+        {"/domain/max", json::array({0.09, 1e18, 0.18}), "scene.json.domain.max: the domain is 1e+18 m long, more than "
+                                                          "1000 m; is it in another unit?"},
+        {"/solids/1/inner_radius", 5.0, "scene.json.solids[1].inner_radius: the cup is 10.012 m across, wider than the "
+                                        "domain's longest side (0.18 m); is it in another unit?"},
+        {"/solids/1/position", json::array({0, 0, 5}), "scene.json.solids[1].position: lies outside the domain"},
+        {"/liquids/0", json{{"type", "box"}, {"min", {1, 1, 1}}, {"max", {2, 2, 2}}},
+         "scene.json.liquids[0].min: lies outside the domain ([-0.09, -0.09, 0] to [0.09, 0.09, 0.18] m)"},
     };
     for (const Case& c : cases) {
         json doc = validScene();

@@ -13,6 +13,9 @@ extern "C" void onCancelSignal(int) { viscoscope::requestCancel(); }
 
 int main(int argc, char** argv) {
     using namespace viscoscope;
+    // First, so that a cancel while the command line is read still ends in exit 3, not a kill.
+    std::signal(SIGINT, onCancelSignal);
+    std::signal(SIGTERM, onCancelSignal);
     CLI::App app{"Viscoscope: identify a liquid's viscosity from video, and simulate it."};
     app.set_version_flag("--version", std::string(VISCOSCOPE_VERSION));
     app.require_subcommand(1);
@@ -36,8 +39,6 @@ int main(int argc, char** argv) {
         return code == 0 ? cli::kExitOk : cli::kExitBadInput;
     }
 
-    std::signal(SIGINT, onCancelSignal);
-    std::signal(SIGTERM, onCancelSignal);
     try {
         for (const cli::Command& command : commands)
             if (command.sub->parsed()) return command.run();

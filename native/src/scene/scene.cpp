@@ -65,6 +65,13 @@ public:
     double positive(const std::string& field, double fallback) const {
         return has(field) ? positive(field) : fallback;
     }
+    // A number within [lo, hi] UNIT: beyond them it is a mistake or a run that never ends.
+    double within(const std::string& field, double lo, double hi, const char* unit, double fallback) const {
+        const double x = number(field, fallback);
+        if (!(x >= lo && x <= hi))
+            fail(field, "must be in [" + format(lo) + ", " + format(hi) + "] " + unit + ", got " + format(x));
+        return x;
+    }
     double nonNegative(const std::string& field, double fallback) const {
         const double x = number(field, fallback);
         if (x < 0) fail(field, "must be >= 0, got " + format(x));
@@ -119,6 +126,14 @@ private:
     std::string path_;
     mutable std::vector<std::string> asked_;
 };
+
+// Bounds past which a scene is a mistake or a run that never ends, not a liquid: a step of
+// CFL·Δx/√(gΔx) stalls under 100 g, a CFL of 1e-6 takes a million steps a cell, a frame of 1e-9
+// fps lasts 30 years; a domain over a kilometre across is almost surely in another unit.
+constexpr double kMaxGravity = 1e3;       // m/s²
+constexpr double kMinFps = 1e-3, kMaxFps = 1e6;
+constexpr double kMinCfl = 1e-2, kMaxCfl = 10;
+constexpr double kMaxDomainSide = 1e3;    // m
 
 void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
     if (!(lo.array() < hi.array()).all()) r.fail("max", "must be greater than min on every axis");
@@ -311,6 +326,9 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     scene.domain.min = domain.vec3("min");
     scene.domain.max = domain.vec3("max");
     requireOrderedBox(domain, scene.domain.min, scene.domain.max);
+    if ((scene.domain.max - scene.domain.min).maxCoeff() > kMaxDomainSide)
+        domain.fail("max", "the domain is " + FieldReader::format((scene.domain.max - scene.domain.min).maxCoeff()) +
+                               " m long, more than " + FieldReader::format(kMaxDomainSide) + " m; is it in another unit?");
     scene.domain.resolution = domain.integer("resolution", 4, 1024);
     if (domain.has("periodic")) {
         const json& p = domain.raw("periodic");
@@ -358,7 +376,10 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     material.finish();
 
     scene.gravity = root.vec3("gravity", scene.gravity);
-    scene.fps = root.positive("fps", 30.0);
+    if (scene.gravity.stableNorm() > kMaxGravity)
+        root.fail("gravity", "must be at most " + FieldReader::format(kMaxGravity) + " m/s² long (9.81 on Earth), got " +
+                                 FieldReader::format(scene.gravity.stableNorm()));
+    scene.fps = root.within("fps", kMinFps, kMaxFps, "frames/s", 30.0);
     if (root.has("frames") && root.has("duration"))
         root.fail("duration", "give either frames or duration, not both");
     if (root.has("duration"))
@@ -377,7 +398,7 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
         }
         scene.solver.tolerance = s.positive("tolerance", scene.solver.tolerance);
         scene.solver.maxIterations = s.integer("max_iterations", 1, 1000000, scene.solver.maxIterations);
-        scene.solver.cfl = s.positive("cfl", scene.solver.cfl);
+        scene.solver.cfl = s.within("cfl", kMinCfl, kMaxCfl, "cells a step", scene.solver.cfl);
         scene.solver.particlesPerCell = s.integer("particles_per_cell", 1, 64, scene.solver.particlesPerCell);
         scene.solver.picardIterations = s.integer("picard_iterations", 1, 50, scene.solver.picardIterations);
         if (s.has("hole_conductance")) {
