@@ -121,8 +121,8 @@ TEST(Scene, BadFieldsAreNamed) {
                                                   "got 1e+300"},
         {"/domain/max", json::array({0.09, 1e18, 0.18}), "scene.json.domain.max: the domain is 1e+18 m long, more than "
                                                           "1000 m; is it in another unit?"},
-        {"/solids/1/inner_radius", 5.0, "scene.json.solids[1].inner_radius: the cup is 10.012 m across, wider than the "
-                                        "domain's longest side (0.18 m); is it in another unit?"},
+        {"/solids/1/inner_radius", 10.0, "scene.json.solids[1].inner_radius: the cup is 20.012 m across, over 100 times "
+                                         "the domain's longest side (0.18 m); is it in another unit?"},
         {"/solids/1/position", json::array({0, 0, 5}), "scene.json.solids[1].position: lies outside the domain"},
         {"/liquids/0", json{{"type", "box"}, {"min", {1, 1, 1}}, {"max", {2, 2, 2}}},
          "scene.json.liquids[0].min: lies outside the domain ([-0.09, -0.09, 0] to [0.09, 0.09, 0.18] m)"},

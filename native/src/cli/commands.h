@@ -4,7 +4,6 @@
 
 #include <CLI/CLI.hpp>
 
-#include <atomic>
 #include <functional>
 
 namespace viscoscope::cli {

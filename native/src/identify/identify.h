@@ -14,7 +14,6 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
-#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <memory>

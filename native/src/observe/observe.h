@@ -12,7 +12,6 @@
 #include <openvdb/openvdb.h>
 #include <opencv2/core.hpp>
 
-#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <optional>

@@ -139,8 +139,8 @@ void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
     if (!(lo.array() < hi.array()).all()) r.fail("max", "must be greater than min on every axis");
 }
 
-// A cup, box or liquid that misses the domain, or a cup wider than it, is a mistake (most often a
-// unit: millimetres for metres), not a scene: it is refused with the field named, before the
+// A cup, box or liquid that misses the domain, or a cup far wider than it, is a mistake (most often
+// a unit: millimetres for metres), not a scene: it is refused with the field named, before the
 // simulation spends minutes finding the domain empty.
 std::string domainExtent(const Domain& d) {
     return "[" + FieldReader::format(d.min.x()) + ", " + FieldReader::format(d.min.y()) + ", " +
@@ -158,9 +158,10 @@ void requireInDomain(const FieldReader& r, const Solid& solid, const Domain& d) 
     if (const auto* cup = std::get_if<CupSolid>(&solid)) {
         const double outer = cup->innerRadius + cup->wallThickness;
         const double across = 2 * outer, domainSide = (d.max - d.min).maxCoeff();
-        if (across > domainSide)
-            r.fail("inner_radius", "the cup is " + FieldReader::format(across) + " m across, wider than the domain's " +
-                                       "longest side (" + FieldReader::format(domainSide) + " m); is it in another unit?");
+        if (across > kMaxSolidOverDomain * domainSide)
+            r.fail("inner_radius", "the cup is " + FieldReader::format(across) + " m across, over " +
+                                       FieldReader::format(kMaxSolidOverDomain) + " times the domain's longest side (" +
+                                       FieldReader::format(domainSide) + " m); is it in another unit?");
         const Vec3 lo = cup->position - Vec3(outer, outer, 0);
         const Vec3 hi = cup->position + Vec3(outer, outer, cup->bottomThickness + cup->height);
         requireBoxMeetsDomain(r, "position", lo, hi, d);

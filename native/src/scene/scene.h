@@ -269,6 +269,10 @@ Scene loadRecordedScene(const std::filesystem::path& record);
 std::vector<std::string> resolutionWarnings(const Scene& scene);
 // The cells across a cup's hole its drain rate needs (the measurements are in scene.cpp).
 inline constexpr double kMinHoleCells = 4.5;
+// A solid this many times the domain's longest side is taken for one in another unit and refused: a
+// cup wider than a periodic domain is a plate with a hole (the hole-calibration benchmark), but one
+// a hundred times wider, or a mesh exported in millimetres, is a mistake.
+inline constexpr double kMaxSolidOverDomain = 100;
 nlohmann::json sceneToJson(const Scene& scene);
 // The first ground plane's height, if the scene has one.
 std::optional<double> groundHeight(const Scene& scene);

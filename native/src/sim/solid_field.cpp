@@ -56,8 +56,6 @@ struct PrimitiveDistance {
 // A mesh exported in another unit (millimetres for metres) misses the domain or dwarfs it, and its
 // voxelisation at the cell size would take minutes and gigabytes before the scene turned out empty:
 // it is refused first. Only its part in the domain matters, so a large one can be cropped to it.
-constexpr double kMaxMeshOverDomain = 100;
-
 void requireMeshFitsDomain(const TriangleMesh& mesh, const std::filesystem::path& path, size_t index,
                            const Grid& grid) {
     Vec3 lo = Vec3::Constant(INFINITY), hi = Vec3::Constant(-INFINITY);
@@ -70,7 +68,7 @@ void requireMeshFitsDomain(const TriangleMesh& mesh, const std::filesystem::path
     if ((hi.array() < domainLo.array()).any() || (lo.array() > domainHi.array()).any())
         throw InputError(where + ": its bounds " + bounds.str() + " lie outside the domain; is it in another unit?");
     const double ratio = (hi - lo).maxCoeff() / grid.extent().maxCoeff();
-    if (ratio > kMaxMeshOverDomain)
+    if (ratio > kMaxSolidOverDomain)
         throw InputError(where + ": its bounds " + bounds.str() + " are " + std::to_string(int(ratio)) +
                          " times the domain's size; is it in millimetres? Scale it to metres, or crop it to the domain");
 }
