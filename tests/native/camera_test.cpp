@@ -263,6 +263,28 @@ TEST(CameraJson, RoundTripsAndLoadsBlenderCameras) {
     std::filesystem::remove_all(dir);
 }
 
+// Values no lens has, each a finite number the type checks let through: refused naming the entry.
+TEST(CameraJson, ValuesNoLensHasAreRefusedNamingTheEntry) {
+    std::mt19937 rng(3);
+    const nlohmann::json valid = cameraToJson(cameraFromBlender(randomBlenderCamera(rng, SensorFit::Auto)));
+    const std::vector<std::pair<std::string, double>> cases{
+        {"/K/0/0", 1e-320}, {"/K/1/1", 1e308}, {"/K/0/2", -1e6}, {"/K/1/2", 1e9},
+        {"/distortion/4", 1e308}, {"/t/2", 2e9}, {"/reprojection_error_px", -1},
+    };
+    for (const auto& [pointer, value] : cases) {
+        nlohmann::json doc = valid;
+        doc[nlohmann::json::json_pointer(pointer)] = value;
+        const std::string field = pointer.substr(1, pointer.find('/', 1) - 1);
+        try {
+            parseCamera(doc, "c.json");
+            ADD_FAILURE() << pointer << " = " << value << " was accepted";
+        } catch (const InputError& e) {
+            EXPECT_EQ(std::string(e.what()).rfind("c.json: " + field + ": ", 0), 0u) << e.what();
+            std::printf("[ refused  ] %s\n", e.what());
+        }
+    }
+}
+
 TEST(SolvePnP, RecoversPoseFromNoisyClicks) {
     std::mt19937 rng(11);
     PinholeCamera truth;

@@ -180,6 +180,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["parameters"][0]["max"] = 10.0;
         expectBadInput(writeJob(doc, "bounds.json"), "lower 100 > upper 10");
     }
+    {  // a spread wider than the whole interval, which the search would clip without a word
+        json doc = job();
+        doc["parameters"][0]["spread"] = 1e308;
+        expectBadInput(writeJob(doc, "spread.json"), "parameters[0].spread: 1e+308 from 5 is a step wider than");
+    }
     {  // non-finite: 1e999 parses as infinity
         std::string text = job().dump();
         const std::string initial = "\"initial\":5.0";
@@ -357,6 +362,23 @@ TEST_F(CliIdentify, AnEvaluationThatCannotWriteStopsTheRun) {
     EXPECT_NE(r.err.find((out / "fields.partial").string()), std::string::npos) << r.err;
     EXPECT_NE(r.err.find(": cannot write (File too large)"), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(out / "result.json"));
+}
+
+// A best fit whose simulation is not the model's (its solve stopped short of the tolerance every
+// frame) says so in the progress lines and result.json's doubts.
+TEST_F(CliIdentify, ABestFitWhoseSolveDidNotConvergeIsDoubted) {
+    json scene = json::parse(slurp(dir_ / "scene.json"));
+    scene["solver"] = {{"max_iterations", 1}};
+    std::ofstream(dir_ / "scene.json") << scene.dump(1);
+    const CommandResult r = run("identify " + writeJob(job(2)).string() + " --out " + (dir_ / "out").string() +
+                                " --progress json --no-plots --no-fields");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json doubts = json::parse(slurp(dir_ / "out/result.json")).at("doubts");
+    const std::string expected = "frames whose pressure–viscosity solve stopped short of its tolerance";
+    EXPECT_TRUE(std::any_of(doubts.begin(), doubts.end(),
+                            [&](const json& d) { return d.get<std::string>().find(expected) != std::string::npos; }))
+        << doubts;
+    EXPECT_NE(r.out.find(expected), std::string::npos) << "not among the progress lines";
 }
 
 TEST_F(CliIdentify, ResumeAfterKillGivesTheUninterruptedResult) {

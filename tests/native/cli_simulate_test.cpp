@@ -276,6 +276,22 @@ TEST_F(SimulateCommand, RunningTheSameSceneAgainResumesBitForBit) {
     EXPECT_FALSE(fs::exists(dir_ / "other/resume.state"));
 }
 
+// A run cut and resumed keeps what its frames before the cut found.
+TEST_F(SimulateCommand, AResumedRunKeepsTheWarningsOfItsFirstPart) {
+    json scene = smallScene();
+    scene["frames"] = 16;
+    scene["solver"]["max_iterations"] = 1;
+    const std::string scenePath = write(scene).string();
+    ASSERT_EQ(simulate(scenePath + " --out " + (dir_ / "whole").string(), dir_).exitCode, 0);
+    ASSERT_EQ(simulateUntil(scenePath, dir_ / "cut", dir_ / "cut/particles_00004.bin"), 3);
+    ASSERT_EQ(simulate(scenePath + " --out " + (dir_ / "cut").string(), dir_).exitCode, 0);
+    const json whole = json::parse(viscoscope::cli_test::slurp(dir_ / "whole/simulation.json"));
+    const json resumed = json::parse(viscoscope::cli_test::slurp(dir_ / "cut/simulation.json"));
+    ASSERT_GE(resumed.value("resumed_from_frame", -1), 1) << "the run was not cut after its first frames";
+    EXPECT_EQ(resumed.at("warnings"), whole.at("warnings"));
+    EXPECT_EQ(whole.at("warnings").size(), 3u) << whole.at("warnings");
+}
+
 // A completed run of the same scene by the same engine build is kept as it is (it would come out
 // bit for bit the same); a missing frame file or another build's run is simulated again, and so is
 // a cut run whose resume state another build wrote.

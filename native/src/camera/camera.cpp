@@ -106,6 +106,7 @@ PinholeCamera cameraFromBlender(const BlenderCameraParams& b) {
     camera.K = intrinsicsFromBlender(b, width, height);
     camera.R = blenderToOpenCv * axes.transpose();
     camera.t = -camera.R * centre;
+    validateCamera(camera, "blender camera");
     return camera;
 }
 
@@ -216,6 +217,49 @@ SensorFit parseSensorFit(const JsonReader& in) {
 
 }  // namespace
 
+namespace {
+
+// Bounds past which a camera is a typo or a unit mistake, not a lens: a field of view outside
+// 0.1°–179°, an optical axis farther outside the image than Blender's lens shift can put it (10
+// image sizes), distortion no lens has, or a camera ten times farther away than a domain can be wide.
+constexpr double kMinFieldOfViewDeg = 0.1, kMaxFieldOfViewDeg = 179;
+constexpr double kMaxAxisOffImage = 10;
+constexpr double kMaxDistortionCoefficient = 1e3;
+constexpr double kMaxCameraDistanceOverDomain = 10;
+
+template <class Fail>
+void requireLensLike(const PinholeCamera& camera, const Fail& fail) {
+    const auto focalFor = [](double pixels, double fovDeg) { return pixels / (2 * std::tan(fovDeg * M_PI / 360)); };
+    const auto fmt = formatNumber;
+    const int sizes[2] = {camera.width, camera.height};
+    for (int axis = 0; axis < 2; ++axis) {
+        const std::string entry = axis == 0 ? "K[0][0]" : "K[1][1]";
+        const double focal = camera.K(axis, axis), lo = focalFor(sizes[axis], kMaxFieldOfViewDeg),
+                     hi = focalFor(sizes[axis], kMinFieldOfViewDeg);
+        if (focal < lo || focal > hi)
+            fail("K", entry + " = " + fmt(focal) + " px is outside [" + fmt(lo) + ", " + fmt(hi) +
+                          "] px, a field of view of " + fmt(kMinFieldOfViewDeg) + "° to " + fmt(kMaxFieldOfViewDeg) +
+                          "° across " + std::to_string(sizes[axis]) + " px");
+        const std::string centreEntry = axis == 0 ? "K[0][2]" : "K[1][2]";
+        const double centre = camera.K(axis, 2);
+        if (std::abs(centre - 0.5 * sizes[axis]) > (kMaxAxisOffImage + 0.5) * sizes[axis])
+            fail("K", centreEntry + " = " + fmt(centre) + " px puts the optical axis more than " +
+                          fmt(kMaxAxisOffImage) + " image sizes (" + std::to_string(sizes[axis]) + " px) outside it");
+    }
+    for (int i = 0; i < 5; ++i)
+        if (std::abs(camera.distortion[i]) > kMaxDistortionCoefficient)
+            fail("distortion", "coefficient " + std::to_string(i) + " = " + fmt(camera.distortion[i]) +
+                                   " is beyond ±" + fmt(kMaxDistortionCoefficient) + ", which no lens has");
+    const double distance = camera.t.norm();  // |centre| = |Rᵀt| for a rotation R
+    if (distance > kMaxCameraDistanceOverDomain * kMaxDomainSide)
+        fail("t", "the camera lies " + fmt(distance) + " m from the origin, beyond the " +
+                      fmt(kMaxCameraDistanceOverDomain * kMaxDomainSide) + " m in which a scene can be seen; is it in another unit?");
+    if (camera.reprojectionErrorPx && !(*camera.reprojectionErrorPx >= 0))
+        fail("reprojection_error_px", "must be ≥ 0, got " + fmt(*camera.reprojectionErrorPx));
+}
+
+}  // namespace
+
 void validateCamera(const PinholeCamera& camera, const std::string& origin) {
     const auto fail = [&](const std::string& field, const std::string& problem) {
         throw InputError(origin + ": " + field + ": " + problem);
@@ -228,6 +272,7 @@ void validateCamera(const PinholeCamera& camera, const std::string& origin) {
         fail("K", "rows 2 and 3 must be [0, fy, cy] and [0, 0, 1]");
     if ((camera.R.transpose() * camera.R - Eigen::Matrix3d::Identity()).norm() > 1e-5 || camera.R.determinant() <= 0)
         fail("R", "must be a rotation (orthonormal, determinant +1)");
+    requireLensLike(camera, fail);
 }
 
 PinholeCamera parseCamera(const nlohmann::json& doc, const std::string& origin) {

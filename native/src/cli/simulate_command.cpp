@@ -73,30 +73,30 @@ constexpr double kMinResumeSaveInterval = 5;  // s
 constexpr double kResumeSaveCostShare = 0.05;  // of the run's time spent saving, at most
 const char* const kResumeFile = "resume.state";
 
-// A share of the liquid lost (out of the domain, or into a solid) that makes a run's result
-// probably wrong: a run conserves its volume to a few percent (the sample cup's drift is -0.3 %).
-constexpr double kLostLiquidShare = 0.2;
-
 // What a run says, once each, when its result is probably wrong: liquid lost and solves stopped
-// short of their tolerance. Each warning reaches the progress lines and simulation.json.
+// short of their tolerance. Each warning reaches the progress lines and simulation.json; a resumed
+// run says again what its frames before the cut found.
 class RunDoubts {
 public:
-    RunDoubts(const nlohmann::json& framesSoFar, double initialVolume) : largestVolume_(initialVolume) {
-        for (const nlohmann::json& frame : framesSoFar) observeVolume(frame.at("volume").get<double>());
+    RunDoubts(const nlohmann::json& framesSoFar, double initialVolume, const ProgressReporter& progress)
+        : largestVolume_(initialVolume) {
+        for (const nlohmann::json& frame : framesSoFar)
+            observe(frame.at("frame").get<int>(), frame.at("converged").get<bool>(), frame.at("volume").get<double>(),
+                    progress);
     }
-    void observe(const sim::FrameStats& stats, const ProgressReporter& progress) {
-        if (!stats.converged && unconvergedFrames_++ == 0)
-            add("frame " + std::to_string(stats.frame) + ": the pressure–viscosity solve stopped at "
+    void observe(int frame, bool converged, double liquidVolume, const ProgressReporter& progress) {
+        if (!converged && unconvergedFrames_++ == 0)
+            add("frame " + std::to_string(frame) + ": the pressure–viscosity solve stopped at "
                 "solver.max_iterations short of solver.tolerance; the flow is not the model's (raise "
                 "max_iterations, or check η, σ and the time step)", progress);
-        const double lost = 1 - stats.liquidVolume / largestVolume_;
-        if (lost > kLostLiquidShare && !lostReported_) {
+        const double lost = 1 - liquidVolume / largestVolume_;
+        if (lost > sim::kLostLiquidShare && !lostReported_) {
             lostReported_ = true;
-            add("frame " + std::to_string(stats.frame) + ": the liquid has lost " + std::to_string(int(100 * lost)) +
+            add("frame " + std::to_string(frame) + ": the liquid has lost " + std::to_string(int(100 * lost)) +
                 " % of its volume (it left the domain or went into a solid); the result describes another amount of "
                 "liquid", progress);
         }
-        observeVolume(stats.liquidVolume);
+        largestVolume_ = std::max(largestVolume_, liquidVolume);
     }
     // With the count of frames whose solve did not converge.
     nlohmann::json warnings() const {
@@ -106,7 +106,6 @@ public:
     }
 
 private:
-    void observeVolume(double volume) { largestVolume_ = std::max(largestVolume_, volume); }
     void add(const std::string& warning, const ProgressReporter& progress) {
         progress.warn(warning);
         warnings_.push_back(warning);
@@ -242,7 +241,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
         return record.wallSeconds + std::chrono::duration<double>(Clock::now() - start).count();
     };
 
-    RunDoubts doubts(record.frames, record.initialVolume);
+    RunDoubts doubts(record.frames, record.initialVolume, progress);
     const int firstFrame = simulation.frame();
     int savedFrame = resumed ? firstFrame : -1;  // the frame resume.state holds
     auto lastSave = Clock::now();
@@ -257,7 +256,7 @@ int simulateIntoFolder(const Scene& scene, const std::filesystem::path& dir, con
             return kExitCancelled;
         }
         writeFrame(simulation, dir);
-        doubts.observe(stats, progress);
+        doubts.observe(stats.frame, stats.converged, stats.liquidVolume, progress);
         const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
         record.frames.push_back(
             {{"frame", stats.frame},        {"time", stats.simulatedTime},

@@ -317,9 +317,15 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     if (silhouettes && std::any_of(job.parameters.begin(), job.parameters.end(),
                                    [](const ParameterSpec& p) { return p.parameter.solid >= 0; }))
         searchedView = sceneVisibility(scene, job.camera);
+    double largestVolume = simulation.liquidVolume();
     for (int frame = 0; frame <= lastFrame; ++frame) {
         const auto simStart = Clock::now();
-        if (frame > 0) simulation.advanceFrame();
+        if (frame > 0) {
+            const sim::FrameStats stats = simulation.advanceFrame();
+            ev.unconvergedFrames += stats.converged ? 0 : 1;
+            ev.liquidLost = std::max(ev.liquidLost, 1 - stats.liquidVolume / largestVolume);
+            largestVolume = std::max(largestVolume, stats.liquidVolume);
+        }
         auto lap = Clock::now();
         ev.simulationSeconds += seconds(simStart, lap);
         const bool compared = std::find(obs.simFrames.begin(), obs.simFrames.end(), frame) != obs.simFrames.end();
@@ -404,6 +410,8 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         const Evaluation other = evaluateOnGrid(job, obs, theta, resolution, {}, gridShift + double(k) / n);
         ev.E += other.E;
         ev.simulatedPixels += other.simulatedPixels;
+        ev.liquidLost = std::max(ev.liquidLost, other.liquidLost);
+        ev.unconvergedFrames += other.unconvergedFrames;
         if (ev.trackError) ev.trackError = std::hypot(*ev.trackError, *other.trackError);
         for (size_t i = 0; i < ev.frameE.size(); ++i) ev.frameE[i] += other.frameE[i];
         ev.seconds += other.seconds;

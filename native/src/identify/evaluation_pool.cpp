@@ -21,6 +21,8 @@ json toJson(const Evaluation& e) {
              {"E", std::isfinite(e.E) ? json(e.E) : json()},  // JSON has no infinity
              {"frame_E", e.frameE},
              {"simulated_pixels", e.simulatedPixels},
+             {"liquid_lost", e.liquidLost},
+             {"unconverged_frames", e.unconvergedFrames},
              {"seconds", e.seconds},
              {"simulation_s", e.simulationSeconds},
              {"silhouette_s", e.silhouetteSeconds},
@@ -41,6 +43,8 @@ Evaluation evaluationFromJson(const json& doc) {
     e.E = doc.at("E").is_null() ? INFINITY : doc.at("E").get<double>();
     e.frameE = doc.at("frame_E").get<std::vector<double>>();
     e.simulatedPixels = doc.at("simulated_pixels").get<double>();
+    e.liquidLost = doc.at("liquid_lost").get<double>();
+    e.unconvergedFrames = doc.at("unconverged_frames").get<int>();
     e.seconds = doc.at("seconds").get<double>();
     e.simulationSeconds = doc.at("simulation_s").get<double>();
     e.silhouetteSeconds = doc.at("silhouette_s").get<double>();

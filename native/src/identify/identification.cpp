@@ -456,9 +456,8 @@ LogSearchSpace logSearchSpace(const Job& job) {
         space.lower[i] = std::log(p.lower);
         space.upper[i] = std::log(p.upper);
         space.start[i] = std::log(p.initial);
-        const double range = space.upper[i] - space.lower[i];
-        space.spread[i] = std::log1p(p.spread / p.initial);
-        if (range > 0) space.spread[i] = std::min(space.spread[i], range / 3);
+        space.spread[i] = p.logSpread();
+        if (p.logRange() > 0) space.spread[i] = std::min(space.spread[i], p.logRange() / 3);
         space.spread[i] = std::max(space.spread[i], 1e-6);
     }
     return space;
@@ -515,9 +514,11 @@ json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const Ident
             }
     }
     double least = INFINITY, most = -INFINITY;
+    const json* best = nullptr;
     std::vector<double> thetaLow(job.parameters.size(), INFINITY), thetaHigh(job.parameters.size(), 0);
     for (const json& e : evaluated) {
         if (e.at("fidelity") != kFull || e.at("E").is_null()) continue;
+        if (e.at("E").get<double>() < least) best = &e;
         least = std::min(least, e.at("E").get<double>());
         most = std::max(most, e.at("E").get<double>());
         for (size_t i = 0; i < thetaLow.size(); ++i) {
@@ -535,6 +536,17 @@ json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const Ident
             doubts.push_back(line.str());
             break;
         }
+    if (best) {  // checkpoints of older builds do not record these
+        const std::string at = "the best evaluation (θ = " + best->at("theta").dump() + ")";
+        if (const double lost = best->value("liquid_lost", 0.0); lost > sim::kLostLiquidShare)
+            doubts.push_back(at + " lost " + std::to_string(int(100 * lost)) +
+                             " % of its liquid (it left the domain or went into a solid), so θ* fits another amount "
+                             "of liquid: check the domain, the solids and the fill");
+        if (const int unconverged = best->value("unconverged_frames", 0); unconverged > 0)
+            doubts.push_back(at + " had " + std::to_string(unconverged) +
+                             " frames whose pressure–viscosity solve stopped short of its tolerance: raise "
+                             "solver.max_iterations");
+    }
     return doubts;
 }
 

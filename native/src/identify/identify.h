@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include <array>
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -103,9 +104,11 @@ private:
 struct ParameterSpec {
     SceneParameter parameter;
     double initial = 10;    // θ0 (SI)
-    double spread = 10;     // initial spread in θ units, converted to log space: σ0 = ln(1 + spread/θ0)
+    double spread = 10;     // initial spread in θ units
     double lower = 1e-3, upper = 1e4;
     const std::string& name() const { return parameter.name; }
+    double logSpread() const { return std::log1p(spread / initial); }  // the search's σ0 in ln θ
+    double logRange() const { return std::log(upper / lower); }
     // E's profile is fitted in 1/θ (fitProfile's `inverse`) when flow speeds scale as 1/θ.
     bool profileInInverse() const { return parameter.declaration->speedScalesInversely; }
 };
@@ -299,6 +302,10 @@ struct Evaluation {
     double E = 0;
     std::vector<double> frameE;
     double simulatedPixels = 0;  // total silhouette area over frames (0 = the camera saw nothing)
+    // Signs the simulation is not the model's: the largest share of its liquid lost since its
+    // fullest frame, and the frames whose solve stopped short of its tolerance (over placements).
+    double liquidLost = 0;
+    int unconvergedFrames = 0;
     // The measured track's relative error, sqrt(Σ(sim − measured)² / Σ measured²), when one is compared.
     std::optional<double> trackError;
     double seconds = 0;

@@ -14,12 +14,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string num(double x) {
-    char text[32];
-    std::snprintf(text, sizeof text, "%g", x);
-    return text;
-}
-
 fs::path resolve(const fs::path& base, const std::string& value) {
     const fs::path p(value);
     return p.is_absolute() || base.empty() ? p : base / p;
@@ -134,16 +128,22 @@ ParameterSpec parseParameter(const nlohmann::json& p, const Scene& scene, const 
     if (p.contains("log") && p.at("log") != nlohmann::json(true))
         throw InputError(where + ".log: only log-space search is supported (log: true)");
     if (spec.lower <= 0)
-        throw InputError(where + ".min: must be > 0 (the search is in log space), got " + num(spec.lower) +
+        throw InputError(where + ".min: must be > 0 (the search is in log space), got " + formatNumber(spec.lower) +
                          (sceneValue == 0 ? " (the scene's value is 0: give min and max)" : ""));
     requireWithinDeclaredBounds(spec.parameter, spec.lower, where + ".min");
     requireWithinDeclaredBounds(spec.parameter, spec.upper, where + ".max");
     if (spec.lower > spec.upper)
-        throw InputError(where + ": bounds: lower " + num(spec.lower) + " > upper " + num(spec.upper));
+        throw InputError(where + ": bounds: lower " + formatNumber(spec.lower) + " > upper " + formatNumber(spec.upper));
     if (spec.initial < spec.lower || spec.initial > spec.upper)
-        throw InputError(where + ".initial: " + num(spec.initial) + " is outside the bounds [" +
-                         num(spec.lower) + ", " + num(spec.upper) + "]");
+        throw InputError(where + ".initial: " + formatNumber(spec.initial) + " is outside the bounds [" +
+                         formatNumber(spec.lower) + ", " + formatNumber(spec.upper) + "]");
     if (spec.spread <= 0) throw InputError(where + ".spread: must be > 0");
+    // The search clips its spread to a third of the interval; one wider than the whole interval is a
+    // mistake, not a request to be clipped silently.
+    if (p.contains("spread") && spec.logSpread() > spec.logRange())
+        throw InputError(where + ".spread: " + formatNumber(spec.spread) + " from " + formatNumber(spec.initial) +
+                         " is a step wider than the whole interval [" + formatNumber(spec.lower) + ", " +
+                         formatNumber(spec.upper) + "] searched in log space");
     return spec;
 }
 
@@ -155,7 +155,7 @@ FixedParameter parseFixed(const nlohmann::json& p, const Scene& scene, const std
     fixed.value = finiteNumber(p, "value", where);
     requireWithinDeclaredBounds(fixed.parameter, fixed.value, where + ".value");
     fixed.uncertainty = optionalNumber(p, "uncertainty", 0.0, where);
-    if (!(fixed.uncertainty >= 0)) throw InputError(where + ".uncertainty: must be ≥ 0, got " + num(fixed.uncertainty));
+    if (!(fixed.uncertainty >= 0)) throw InputError(where + ".uncertainty: must be ≥ 0, got " + formatNumber(fixed.uncertainty));
     return fixed;
 }
 

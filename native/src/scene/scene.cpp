@@ -10,6 +10,12 @@
 
 namespace viscoscope {
 
+std::string formatNumber(double x) {
+    std::ostringstream s;
+    s << x;
+    return s.str();
+}
+
 using nlohmann::json;
 
 namespace {
@@ -59,7 +65,7 @@ public:
     }
     double positive(const std::string& field) const {
         const double x = number(field);
-        if (!(x > 0)) fail(field, "must be > 0, got " + format(x));
+        if (!(x > 0)) fail(field, "must be > 0, got " + formatNumber(x));
         return x;
     }
     double positive(const std::string& field, double fallback) const {
@@ -69,12 +75,12 @@ public:
     double within(const std::string& field, double lo, double hi, const char* unit, double fallback) const {
         const double x = number(field, fallback);
         if (!(x >= lo && x <= hi))
-            fail(field, "must be in [" + format(lo) + ", " + format(hi) + "] " + unit + ", got " + format(x));
+            fail(field, "must be in [" + formatNumber(lo) + ", " + formatNumber(hi) + "] " + unit + ", got " + formatNumber(x));
         return x;
     }
     double nonNegative(const std::string& field, double fallback) const {
         const double x = number(field, fallback);
-        if (x < 0) fail(field, "must be >= 0, got " + format(x));
+        if (x < 0) fail(field, "must be >= 0, got " + formatNumber(x));
         return x;
     }
     int integer(const std::string& field, int lo, int hi) const {
@@ -115,12 +121,6 @@ public:
     }
     FieldReader child(const std::string& field) const { return FieldReader(raw(field), where(field)); }
 
-    static std::string format(double x) {
-        std::ostringstream s;
-        s << x;
-        return s.str();
-    }
-
 private:
     const json& object_;
     std::string path_;
@@ -129,11 +129,10 @@ private:
 
 // Bounds past which a scene is a mistake or a run that never ends, not a liquid: a step of
 // CFL·Δx/√(gΔx) stalls under 100 g, a CFL of 1e-6 takes a million steps a cell, a frame of 1e-9
-// fps lasts 30 years; a domain over a kilometre across is almost surely in another unit.
+// fps lasts 30 years.
 constexpr double kMaxGravity = 1e3;       // m/s²
 constexpr double kMinFps = 1e-3, kMaxFps = 1e6;
 constexpr double kMinCfl = 1e-2, kMaxCfl = 10;
-constexpr double kMaxDomainSide = 1e3;    // m
 
 void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
     if (!(lo.array() < hi.array()).all()) r.fail("max", "must be greater than min on every axis");
@@ -143,9 +142,9 @@ void requireOrderedBox(const FieldReader& r, const Vec3& lo, const Vec3& hi) {
 // a unit: millimetres for metres), not a scene: it is refused with the field named, before the
 // simulation spends minutes finding the domain empty.
 std::string domainExtent(const Domain& d) {
-    return "[" + FieldReader::format(d.min.x()) + ", " + FieldReader::format(d.min.y()) + ", " +
-           FieldReader::format(d.min.z()) + "] to [" + FieldReader::format(d.max.x()) + ", " +
-           FieldReader::format(d.max.y()) + ", " + FieldReader::format(d.max.z()) + "] m";
+    return "[" + formatNumber(d.min.x()) + ", " + formatNumber(d.min.y()) + ", " +
+           formatNumber(d.min.z()) + "] to [" + formatNumber(d.max.x()) + ", " +
+           formatNumber(d.max.y()) + ", " + formatNumber(d.max.z()) + "] m";
 }
 
 void requireBoxMeetsDomain(const FieldReader& r, const std::string& field, const Vec3& lo, const Vec3& hi,
@@ -159,9 +158,9 @@ void requireInDomain(const FieldReader& r, const Solid& solid, const Domain& d) 
         const double outer = cup->innerRadius + cup->wallThickness;
         const double across = 2 * outer, domainSide = (d.max - d.min).maxCoeff();
         if (across > kMaxSolidOverDomain * domainSide)
-            r.fail("inner_radius", "the cup is " + FieldReader::format(across) + " m across, over " +
-                                       FieldReader::format(kMaxSolidOverDomain) + " times the domain's longest side (" +
-                                       FieldReader::format(domainSide) + " m); is it in another unit?");
+            r.fail("inner_radius", "the cup is " + formatNumber(across) + " m across, over " +
+                                       formatNumber(kMaxSolidOverDomain) + " times the domain's longest side (" +
+                                       formatNumber(domainSide) + " m); is it in another unit?");
         const Vec3 lo = cup->position - Vec3(outer, outer, 0);
         const Vec3 hi = cup->position + Vec3(outer, outer, cup->bottomThickness + cup->height);
         requireBoxMeetsDomain(r, "position", lo, hi, d);
@@ -188,8 +187,8 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
         cup.holeRadius = r.parameter("hole_radius");
         if (cup.holeRadius >= cup.innerRadius)
             r.fail("hole_radius", "must be smaller than inner_radius (" +
-                                      FieldReader::format(cup.innerRadius) + "), got " +
-                                      FieldReader::format(cup.holeRadius));
+                                      formatNumber(cup.innerRadius) + "), got " +
+                                      formatNumber(cup.holeRadius));
         return cup;
     }
     if (type == "mesh") {
@@ -225,7 +224,7 @@ LiquidSource parseLiquid(const FieldReader& r, const std::vector<Solid>& solids)
         const CupSolid& cup = std::get<CupSolid>(solids[fill.cup]);
         const double capacity = M_PI * cup.innerRadius * cup.innerRadius * cup.height;
         if (fill.volume > capacity)
-            r.fail("volume", "exceeds the cup's capacity of " + FieldReader::format(capacity) + " m³");
+            r.fail("volume", "exceeds the cup's capacity of " + formatNumber(capacity) + " m³");
         return fill;
     }
     if (type == "emitter") {
@@ -328,8 +327,8 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     scene.domain.max = domain.vec3("max");
     requireOrderedBox(domain, scene.domain.min, scene.domain.max);
     if ((scene.domain.max - scene.domain.min).maxCoeff() > kMaxDomainSide)
-        domain.fail("max", "the domain is " + FieldReader::format((scene.domain.max - scene.domain.min).maxCoeff()) +
-                               " m long, more than " + FieldReader::format(kMaxDomainSide) + " m; is it in another unit?");
+        domain.fail("max", "the domain is " + formatNumber((scene.domain.max - scene.domain.min).maxCoeff()) +
+                               " m long, more than " + formatNumber(kMaxDomainSide) + " m; is it in another unit?");
     scene.domain.resolution = domain.integer("resolution", 4, 1024);
     if (domain.has("periodic")) {
         const json& p = domain.raw("periodic");
@@ -378,8 +377,8 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
 
     scene.gravity = root.vec3("gravity", scene.gravity);
     if (scene.gravity.stableNorm() > kMaxGravity)
-        root.fail("gravity", "must be at most " + FieldReader::format(kMaxGravity) + " m/s² long (9.81 on Earth), got " +
-                                 FieldReader::format(scene.gravity.stableNorm()));
+        root.fail("gravity", "must be at most " + formatNumber(kMaxGravity) + " m/s² long (9.81 on Earth), got " +
+                                 formatNumber(scene.gravity.stableNorm()));
     scene.fps = root.within("fps", kMinFps, kMaxFps, "frames/s", 30.0);
     if (root.has("frames") && root.has("duration"))
         root.fail("duration", "give either frames or duration, not both");
@@ -418,8 +417,8 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
         if (o.has("surface_smoothing")) {
             scene.outputs.surfaceSmoothing = o.positive("surface_smoothing");
             if (!(scene.outputs.surfaceSmoothing < 4 * scene.cellSize()))
-                o.fail("surface_smoothing", "must be below 4 cells (" + FieldReader::format(4 * scene.cellSize()) +
-                                                " m), got " + FieldReader::format(scene.outputs.surfaceSmoothing));
+                o.fail("surface_smoothing", "must be below 4 cells (" + formatNumber(4 * scene.cellSize()) +
+                                                " m), got " + formatNumber(scene.outputs.surfaceSmoothing));
         }
         o.finish();
     }

@@ -273,6 +273,10 @@ inline constexpr double kMinHoleCells = 4.5;
 // cup wider than a periodic domain is a plate with a hole (the hole-calibration benchmark), but one
 // a hundred times wider, or a mesh exported in millimetres, is a mistake.
 inline constexpr double kMaxSolidOverDomain = 100;
+// x as a message shows it: six significant digits, as printf's %g.
+std::string formatNumber(double x);
+// A domain over a kilometre across is almost surely in another unit.
+inline constexpr double kMaxDomainSide = 1e3;  // m
 nlohmann::json sceneToJson(const Scene& scene);
 // The first ground plane's height, if the scene has one.
 std::optional<double> groundHeight(const Scene& scene);
