@@ -34,6 +34,7 @@ from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 
 from . import props, schema
+from .atomic_files import written_atomically
 
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
@@ -142,15 +143,8 @@ def fluid_values(fluid):
 def write_preset(path, name, values):
     """Whole or not at all: a full disk leaves the previous preset, not half of a new one."""
     lines = [repr(name), *BOILERPLATE, ""] + ["fluid.%s = %r" % item for item in values.items()]
-    partial = path + ".partial"
-    try:
-        with open(partial, "w", encoding="utf-8") as fh:
-            fh.write("\n".join(lines) + "\n")
-        os.replace(partial, path)
-    except OSError:
-        if os.path.exists(partial):
-            os.remove(partial)
-        raise
+    with written_atomically(path) as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def _assigned_field(node):
@@ -261,10 +255,10 @@ class VISCOSCOPE_OT_fluid_preset_add(AddPresetBase, bpy.types.Operator):
             return {'FINISHED'}  # as AddPresetBase: the dialog closed without a name saves nothing
         try:
             values = fluid_values(context.scene.viscoscope.fluid)
-        except PresetError as exc:
+            write_preset(find_preset(name) or new_preset_path(name), name, values)
+        except (PresetError, OSError) as exc:
             self.report({'ERROR'}, "Preset %r not saved: %s" % (name, exc))
             return {'CANCELLED'}
-        write_preset(find_preset(name) or new_preset_path(name), name, values)
         VISCOSCOPE_MT_fluid_presets.bl_label = name
         wm = context.window_manager
         if wm.preset_name == name:  # as AddPresetBase: the panel's name field is ready for the next one

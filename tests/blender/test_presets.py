@@ -277,6 +277,20 @@ def test_a_nan_is_refused_at_save(ctx):
     assert _preset_files() == set()
 
 
+def test_a_failed_save_leaves_the_previous_preset_and_names_the_file(ctx):
+    """A disk that fills up while the preset is written (/dev/full behind its .partial answers ENOSPC)."""
+    path = _save("Clover Honey")
+    previous = open(path, "rb").read()
+    ctx.scene.viscoscope.fluid.viscosity = 3.0
+    os.symlink("/dev/full", path + ".partial")
+    with pytest.raises(RuntimeError) as raised:
+        bpy.ops.viscoscope.fluid_preset_add(name="Clover Honey")
+    message = str(raised.value).strip()
+    assert "Preset 'Clover Honey' not saved: cannot write %s: No space left on device" % path in message
+    assert "\n" not in message
+    assert open(path, "rb").read() == previous and not os.path.lexists(path + ".partial")
+
+
 # Hand-written preset files, each good up to its last line: (that line, the message's field).
 BROKEN = {
     "nan": ("fluid.viscosity = nan", "viscosity: nan is not a plain value"),
