@@ -17,10 +17,11 @@ and digits of any script, "-" and "_" (see preset_filename).
 
 A preset is never executed. Loading parses it with ast, reads each value with ast.literal_eval and
 checks every one (a preset field, the property's type, finite, within the property's hard bounds,
-an item of its enum) before it applies any, so a damaged, hand-edited or newer preset changes
-nothing and says which file and field are wrong. Saving refuses what loading would (a NaN) and
-writes the name and every value with repr(). So no preset name or value can inject code;
-tests/blender/test_presets.py checks it.
+an item of its enum, text Blender can hold) before it applies any, so a damaged, hand-edited or
+newer preset changes nothing and says in one line which file and field are wrong; a file larger
+than any preset or nested deeper than ast goes is refused the same way. Saving refuses what loading
+would (a NaN) and writes the name and every value with repr(), whole or not at all. So no preset
+name or value can inject code; tests/blender/test_presets.py checks it, with a mutation corpus.
 """
 
 import ast
@@ -34,6 +35,7 @@ from bl_operators.presets import AddPresetBase
 from bl_ui.utils import PresetPanel
 
 from . import props, schema
+from .atomic_files import written_atomically
 
 PRESET_SUBDIR = os.path.join("viscoscope", "fluid")
 
@@ -48,6 +50,10 @@ FLUID_FIELDS = (("description", "model") + MATERIAL_PARAMETERS
 
 # The lines Blender's presets bind the fluid with: a preset may have them, nothing else but values.
 BOILERPLATE = ("import bpy", "fluid = bpy.context.scene.viscoscope.fluid")
+
+# A saved preset is a few hundred bytes, a few KiB with a long description. A larger file is no
+# preset and is not parsed: parsing time and the text a refusal shows stay bounded whatever it holds.
+MAX_PRESET_BYTES = 64 * 1024
 
 
 class PresetError(ValueError):
@@ -70,9 +76,8 @@ def preset_name(path):
     """The name a preset was saved under (its file's first line); for a preset without one, the name
     Blender's menus give its file."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            name = ast.get_docstring(ast.parse(fh.read()), clean=False)
-    except (OSError, ValueError, SyntaxError):  # a broken file still gets a menu entry, to report on
+        name = ast.get_docstring(_parsed(path), clean=False)
+    except PresetError:  # a broken file still gets a menu entry, to report on
         name = None
     return name or bpy.path.display_name(path, title_case=False)
 
@@ -98,11 +103,36 @@ def _is_vector(prop):
     return prop.type == 'FLOAT' and prop.is_array
 
 
+def _excerpt(text, limit=60):
+    """`text`, cut to `limit` characters: a refusal is one line the panel can show."""
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def _shown(value):
+    return _excerpt(repr(value))
+
+
+def _blender_can_hold(text):
+    """Blender holds text as UTF-8 up to its first NUL: other text would be stored cut short, or
+    refused by the assignment after the fields before it were applied."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:  # a lone surrogate, which "\udc80" in a file makes
+        return False
+    return "\0" not in text
+
+
+def _fluid_property(field):
+    if field not in FLUID_FIELDS:
+        raise PresetError("%s: not a field of a fluid preset (one from a newer Viscoscope?)" % _excerpt(field))
+    return props.ViscoscopeFluid.bl_rna.properties[field]
+
+
 def _checked_number(field, number, prop):
     if isinstance(number, bool) or not isinstance(number, (int, float)):
-        raise PresetError("%s: %r is not a number" % (field, number))
+        raise PresetError("%s: %s is not a number" % (field, _shown(number)))
     if not math.isfinite(number):
-        raise PresetError("%s: %r is not a finite number" % (field, number))
+        raise PresetError("%s: %s is not a finite number" % (field, _shown(number)))
     if not prop.hard_min <= number <= prop.hard_max:
         raise PresetError("%s: %g is outside %g to %g" % (field, number, prop.hard_min, prop.hard_max))
     return float(number)
@@ -111,21 +141,22 @@ def _checked_number(field, number, prop):
 def checked_value(field, value):
     """`value` as the fluid's `field` takes it, or PresetError: a preset is checked whole before
     any of it is applied, since assigning clamps out-of-range numbers silently and stores a NaN."""
-    if field not in FLUID_FIELDS:
-        raise PresetError("%s: not a field of a fluid preset (one from a newer Viscoscope?)" % field)
-    prop = props.ViscoscopeFluid.bl_rna.properties[field]
+    prop = _fluid_property(field)
     if prop.type == 'STRING':
         if not isinstance(value, str):
-            raise PresetError("%s: %r is not text" % (field, value))
+            raise PresetError("%s: %s is not text" % (field, _shown(value)))
+        if not _blender_can_hold(value):
+            raise PresetError("%s: %s is not text Blender can hold (a NUL or a lone surrogate)"
+                              % (field, _shown(value)))
         return value
     if prop.type == 'ENUM':
         items = [item.identifier for item in prop.enum_items]
         if not isinstance(value, str) or value not in items:
-            raise PresetError("%s: %r is not one of %s" % (field, value, ", ".join(items)))
+            raise PresetError("%s: %s is not one of %s" % (field, _shown(value), ", ".join(items)))
         return value
     if _is_vector(prop):
         if not isinstance(value, (tuple, list)) or len(value) != prop.array_length:
-            raise PresetError("%s: %r is not %d numbers" % (field, value, prop.array_length))
+            raise PresetError("%s: %s is not %d numbers" % (field, _shown(value), prop.array_length))
         return tuple(_checked_number(field, number, prop) for number in value)
     if prop.type == 'FLOAT':
         return _checked_number(field, value, prop)
@@ -142,15 +173,8 @@ def fluid_values(fluid):
 def write_preset(path, name, values):
     """Whole or not at all: a full disk leaves the previous preset, not half of a new one."""
     lines = [repr(name), *BOILERPLATE, ""] + ["fluid.%s = %r" % item for item in values.items()]
-    partial = path + ".partial"
-    try:
-        with open(partial, "w", encoding="utf-8") as fh:
-            fh.write("\n".join(lines) + "\n")
-        os.replace(partial, path)
-    except OSError:
-        if os.path.exists(partial):
-            os.remove(partial)
-        raise
+    with written_atomically(path) as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def _assigned_field(node):
@@ -162,26 +186,51 @@ def _assigned_field(node):
     return None
 
 
+def _parsed(path):
+    """The syntax tree of a preset file, which is parsed, never executed; PresetError when it cannot be."""
+    try:
+        with open(path, "rb") as fh:
+            source = fh.read(MAX_PRESET_BYTES + 1)
+    except OSError as exc:
+        raise PresetError("cannot be read: %s" % exc) from exc
+    if len(source) > MAX_PRESET_BYTES:
+        raise PresetError("larger than %d KiB, which no preset is" % (MAX_PRESET_BYTES // 1024))
+    try:
+        return ast.parse(source.decode("utf-8"))
+    except (ValueError, SyntaxError) as exc:  # not UTF-8, a NUL byte, not Python
+        raise PresetError("cannot be read: %s" % exc) from exc
+    except (RecursionError, MemoryError) as exc:  # the parser's answers to deep nesting, not a lack of memory
+        raise PresetError("cannot be read: nested too deeply") from exc
+
+
+def _read_statement(node):
+    """(field, checked value) of a `fluid.NAME = value` statement, None for a line of BOILERPLATE."""
+    field = _assigned_field(node)
+    if field is None:
+        if ast.unparse(node) in BOILERPLATE:
+            return None
+        raise PresetError("line %d is not a 'fluid.NAME = value' line" % node.lineno)
+    _fluid_property(field)  # an unknown field is named as such, before its value is judged
+    try:
+        value = ast.literal_eval(node.value)
+    except (ValueError, TypeError) as exc:
+        raise PresetError("%s: %s is not a plain value" % (field, _excerpt(ast.unparse(node.value)))) from exc
+    return field, checked_value(field, value)
+
+
 def read_preset(path):
     """{field: value} of a preset file, parsed and checked, never executed; PresetError says what is wrong."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            tree = ast.parse(fh.read())
-    except (OSError, ValueError, SyntaxError) as exc:
-        raise PresetError("cannot be read: %s" % exc) from exc
+    tree = _parsed(path)
     body = tree.body[1:] if ast.get_docstring(tree, clean=False) is not None else tree.body
     values = {}
     for node in body:
-        if ast.unparse(node) in BOILERPLATE:
-            continue
-        field = _assigned_field(node)
-        if field is None:
-            raise PresetError("line %d is not a 'fluid.NAME = value' line" % node.lineno)
         try:
-            value = ast.literal_eval(node.value)
-        except (ValueError, TypeError) as exc:
-            raise PresetError("%s: %s is not a plain value" % (field, ast.unparse(node.value))) from exc
-        values[field] = checked_value(field, value)
+            statement = _read_statement(node)
+        except RecursionError as exc:  # ast.unparse recurses as deep as the line nests, past the parser's own limit
+            raise PresetError("line %d is nested too deeply" % node.lineno) from exc
+        if statement is not None:
+            field, value = statement
+            values[field] = value
     return values
 
 
@@ -261,10 +310,10 @@ class VISCOSCOPE_OT_fluid_preset_add(AddPresetBase, bpy.types.Operator):
             return {'FINISHED'}  # as AddPresetBase: the dialog closed without a name saves nothing
         try:
             values = fluid_values(context.scene.viscoscope.fluid)
-        except PresetError as exc:
+            write_preset(find_preset(name) or new_preset_path(name), name, values)
+        except (PresetError, OSError) as exc:
             self.report({'ERROR'}, "Preset %r not saved: %s" % (name, exc))
             return {'CANCELLED'}
-        write_preset(find_preset(name) or new_preset_path(name), name, values)
         VISCOSCOPE_MT_fluid_presets.bl_label = name
         wm = context.window_manager
         if wm.preset_name == name:  # as AddPresetBase: the panel's name field is ready for the next one

@@ -11,6 +11,7 @@ import os
 import bpy
 
 from . import schema, units
+from .atomic_files import written_atomically
 
 SCENE_FORMAT = "viscoscope.scene"
 SCENE_VERSION = 1
@@ -104,7 +105,7 @@ def write_obj(obj, path, depsgraph, scale_length):
             raise ExportError("solid '%s' has no faces" % obj.name)
         mesh.calc_loop_triangles()
         mw = obj.matrix_world
-        with open(path, "w", encoding="utf-8") as fh:
+        with written_atomically(path) as fh:
             fh.write("# Viscoscope solid '%s', metres, world space, Z up\n" % obj.name.replace("\n", " "))
             for v in mesh.vertices:
                 p = mw @ v.co
@@ -228,7 +229,7 @@ def export_scene(scene, path, objects=None):
     """Write the scene JSON to path and return the dict."""
     data = build_scene(scene, os.path.dirname(os.path.abspath(path)), objects)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path, "w", encoding="utf-8") as fh:
+    with written_atomically(path) as fh:
         json.dump(data, fh, indent=1, allow_nan=False)
     return data
 
@@ -259,17 +260,18 @@ def camera_dict(cam_obj, scene):
             "sensor_width_mm": _field("camera sensor_width", cam.sensor_width, positive=True),
             "sensor_height_mm": _field("camera sensor_height", cam.sensor_height, positive=True),
             "sensor_fit": cam.sensor_fit,
-            "shift_x": cam.shift_x, "shift_y": cam.shift_y,
+            "shift_x": _field("camera shift_x", cam.shift_x), "shift_y": _field("camera shift_y", cam.shift_y),
             "resolution_x": r.resolution_x, "resolution_y": r.resolution_y,
             "resolution_percentage": r.resolution_percentage,
-            "pixel_aspect_x": r.pixel_aspect_x, "pixel_aspect_y": r.pixel_aspect_y,
+            "pixel_aspect_x": _field("render pixel_aspect_x", r.pixel_aspect_x, positive=True),
+            "pixel_aspect_y": _field("render pixel_aspect_y", r.pixel_aspect_y, positive=True),
             "matrix_world": matrix}
 
 
 def export_camera(cam_obj, scene, path):
     data = camera_dict(cam_obj, scene)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    with open(path, "w", encoding="utf-8") as fh:
+    with written_atomically(path) as fh:
         json.dump(data, fh, indent=1, allow_nan=False)
     return data
 

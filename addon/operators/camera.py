@@ -8,6 +8,7 @@ import bpy
 from mathutils import Matrix, Vector
 
 from .. import camera_math, engine, prefs, scene_export
+from ..atomic_files import written_atomically
 
 
 def scene_camera(context):
@@ -138,7 +139,7 @@ class VISCOSCOPE_OT_match_camera(bpy.types.Operator):
             intr_path = os.path.join(folder, "intrinsics.json")
             engine.run_quick([exe, "camera", "convert", bc_path, "--out", intr_path])
             pts_path = os.path.join(folder, "points.json")
-            with open(pts_path, "w", encoding="utf-8") as fh:
+            with written_atomically(pts_path) as fh:
                 json.dump({"world": world, "image": image}, fh, allow_nan=False)
             out_path = os.path.join(folder, "camera.json")
             engine.run_quick([exe, "camera", "pnp", "--points", pts_path, "--intrinsics", intr_path, "--out", out_path])

@@ -8,6 +8,7 @@ import os
 import bpy
 
 from .. import engine, prefs, scene_export, schema
+from ..atomic_files import written_atomically
 from .runner import EngineOperator, is_running
 from .silhouettes import extraction_settings, reference_video
 
@@ -75,7 +76,7 @@ def write_job(context, folder):
         "seed": vs.sim_seed,
     }
     path = os.path.join(folder, "job.json")
-    with open(path, "w", encoding="utf-8") as fh:
+    with written_atomically(path) as fh:
         json.dump(job, fh, indent=1, allow_nan=False)
     return path, note
 

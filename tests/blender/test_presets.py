@@ -4,6 +4,8 @@ same file name; a preset loads whole or not at all; no code injection."""
 import ast
 import glob
 import os
+import random
+import time
 import types
 
 import bpy
@@ -277,6 +279,20 @@ def test_a_nan_is_refused_at_save(ctx):
     assert _preset_files() == set()
 
 
+def test_a_failed_save_leaves_the_previous_preset_and_names_the_file(ctx):
+    """A disk that fills up while the preset is written (/dev/full behind its .partial answers ENOSPC)."""
+    path = _save("Clover Honey")
+    previous = open(path, "rb").read()
+    ctx.scene.viscoscope.fluid.viscosity = 3.0
+    os.symlink("/dev/full", path + ".partial")
+    with pytest.raises(RuntimeError) as raised:
+        bpy.ops.viscoscope.fluid_preset_add(name="Clover Honey")
+    message = str(raised.value).strip()
+    assert "Preset 'Clover Honey' not saved: cannot write %s: No space left on device" % path in message
+    assert "\n" not in message
+    assert open(path, "rb").read() == previous and not os.path.lexists(path + ".partial")
+
+
 # Hand-written preset files, each good up to its last line: (that line, the message's field).
 BROKEN = {
     "nan": ("fluid.viscosity = nan", "viscosity: nan is not a plain value"),
@@ -289,6 +305,20 @@ BROKEN = {
                         "description: __import__"),
     "code as a line": ("__import__('os').system('touch {mark}')", "line 6 is not a 'fluid.NAME = value' line"),
     "syntax": ("fluid.viscosity = = 3", "cannot be read: invalid syntax"),
+    # Found by the mutation fuzz below (seed 67) or while building its corpus: nesting and the surrogate
+    # escaped as tracebacks, the surrogate after the fields before it were applied; the NUL was applied
+    # cut short; a long value was shown whole in the refusal.
+    "nested past the parser (RecursionError)": ("fluid.viscosity = " + "-" * 5000 + "1",
+                                                "cannot be read: nested too deeply"),
+    "nested past the parser (MemoryError)": ("fluid.viscosity = " + "not " * 10000 + "1",
+                                             "cannot be read: nested too deeply"),
+    "nested past ast.unparse": ("fluid.viscosity = " + "-" * 900 + "1", "line 6 is nested too deeply"),
+    "lone surrogate": ("fluid.identified_from = '\\ud800'",
+                       "identified_from: '\\ud800' is not text Blender can hold"),
+    "NUL in text": ("fluid.description = 'honey\\x00code'",
+                    "description: 'honey\\x00code' is not text Blender can hold"),
+    "long value": ("fluid.flow_index = '%s'" % ("x" * 60000), "flow_index: '%s… is not a number" % ("x" * 58)),
+    "larger than any preset": ("fluid.description = '%s'" % ("x" * 10 ** 7), "larger than 64 KiB, which no preset is"),
 }
 
 
@@ -304,9 +334,88 @@ def test_a_broken_preset_applies_nothing_and_names_file_and_field(ctx, tmp_path,
     with pytest.raises(RuntimeError) as raised:
         _load(str(path))
     assert "Preset Broken_Honey.py not loaded: " + message in str(raised.value)
-    assert "\n" not in str(raised.value).strip()
+    assert "\n" not in str(raised.value).strip() and len(str(raised.value)) < 400
     assert _fluid_state(ctx.scene.viscoscope.fluid) == before
     assert not mark.exists()
+
+
+# Values put in place of a preset's value by the mutation fuzz: not numbers, not finite, code, too large
+# to build or to show, and nested past what Python's parser and ast's functions recurse into.
+HOSTILE_VALUES = (
+    "nan", "inf", "-1", "1e309", "()", "__import__('os').system('touch {mark}')", "[1]*10**8", "'x'*10**7",
+    "'%s'" % ("x" * 10 ** 7), "(%s)" % ("1, " * 20000), "[" * 100000 + "]" * 100000, "-" * 5000 + "1",
+    "-" * 900 + "1", "not " * 10000 + "1", "'\\ud800'", "'a\\x00b'",
+)
+MUTATIONS = ("cut short", "byte replaced", "line duplicated", "line deleted", "hostile value", "field misspelt")
+FUZZ_SEED, FUZZ_MUTANTS = 67, 200
+
+
+def _mutant(rng, preset, kind, mark):
+    """The preset's bytes mutated once, by `kind`."""
+    lines = preset.splitlines(keepends=True)
+    assignments = [i for i, line in enumerate(lines) if line.startswith(b"fluid.")]
+    if kind == "cut short":
+        return preset[:rng.randrange(len(preset))]
+    if kind == "byte replaced":
+        at = rng.randrange(len(preset))
+        return preset[:at] + bytes([rng.randrange(256)]) + preset[at + 1:]
+    at = rng.randrange(len(lines))
+    if kind == "line duplicated":
+        return b"".join(lines[:at + 1] + lines[at:])
+    if kind == "line deleted":
+        return b"".join(lines[:at] + lines[at + 1:])
+    at = rng.choice(assignments)
+    field = lines[at].decode("utf-8").split(" = ", 1)[0]
+    if kind == "hostile value":
+        lines[at] = ("%s = %s\n" % (field, rng.choice(HOSTILE_VALUES).format(mark=mark))).encode("utf-8")
+    else:
+        name = field[len("fluid."):]
+        letter = rng.randrange(len(name))
+        typo = rng.choice([c for c in "abcdefghijklmnopqrstuvwxyz_" if c != name[letter]])
+        lines[at] = lines[at].replace(name.encode(), (name[:letter] + typo + name[letter + 1:]).encode(), 1)
+    return b"".join(lines)
+
+
+def test_mutants_of_a_saved_preset_apply_whole_or_are_refused_in_one_line(ctx, tmp_path, capsys):
+    """Issue 67's mutation corpus for presets: each mutant of a preset the add-on saved either applies
+    whole (every value valid, exactly as the loader accepted it) or is refused in one line naming its
+    file, with the fluid untouched; no code runs, no other exception escapes. Seeded: a failure repeats."""
+    fluid = ctx.scene.viscoscope.fluid
+    for name, value in MATERIALS["Herschel–Bulkley"].items():
+        setattr(fluid, name, value)
+    fluid.identified_from = "ketchup.mp4: η 40 Pa·s, interval 38–42 Pa·s"
+    with open(_save("Fuzz Ketchup"), "rb") as fh:
+        preset = fh.read()
+    mark = tmp_path / "PWNED"
+    rng = random.Random(FUZZ_SEED)
+    outcomes, slowest = {"applied": 0, "refused": 0}, (0.0, None)
+    for number in range(FUZZ_MUTANTS):
+        kind = rng.choice(MUTATIONS)
+        path = tmp_path / ("mutant_%03d.py" % number)
+        path.write_bytes(_mutant(rng, preset, kind, mark))
+        case = "mutant %d (%s)" % (number, kind)
+        before = _fluid_state(fluid)
+        started = time.monotonic()
+        try:
+            _load(str(path))
+        except RuntimeError as exc:
+            message = str(exc).strip()
+            assert message.startswith("Error: Preset %s not loaded: " % path.name), (case, message[:2000])
+            assert "\n" not in message and len(message) < 400, (case, message[:2000])
+            assert _fluid_state(fluid) == before, case
+            outcomes["refused"] += 1
+        else:
+            after = _fluid_state(fluid)
+            for field, value in presets.read_preset(str(path)).items():
+                held = presets.checked_value(field, after[field])
+                assert held == (value if isinstance(value, str) else pytest.approx(value, rel=1e-6)), (case, field)
+            outcomes["applied"] += 1
+        slowest = max(slowest, (time.monotonic() - started, case))
+        assert not mark.exists() and not os.path.exists("PWNED"), case
+    with capsys.disabled():
+        print("\npreset fuzz, seed %d: %d applied, %d refused; slowest load %.2f s, %s"
+              % (FUZZ_SEED, outcomes["applied"], outcomes["refused"], *slowest))
+    assert outcomes["applied"] and outcomes["refused"]
 
 
 def test_a_preset_of_blenders_own_writer_loads(ctx, tmp_path):

@@ -213,3 +213,47 @@ def test_identify_resolution_meets_the_engines_need_for_the_cup(ctx, tmp_work, e
         assert any("hole" in w for w in warnings) is warned, (res, warnings)
     vs.identify_resolution = resolution + 4  # a finer grid than needed is kept as asked
     assert identify.identify_resolution(ctx.scene, data) == (resolution + 4, "")
+
+
+def _files(folder):
+    return {path.name: path.read_bytes() for path in folder.iterdir()}
+
+
+@pytest.mark.parametrize("failing", ["scene.json", "solid_Box.obj"])
+def test_a_failed_write_leaves_the_previous_export_and_names_the_file(ctx, tmp_work, failing):
+    """A disk that fills up while a file is written (/dev/full behind its .partial answers ENOSPC): the
+    previous export stands byte for byte, nothing half-written is left, and one line names the file."""
+    _cup_scene(ctx, 1.0)
+    bpy.ops.mesh.primitive_cube_add(size=0.02, location=(0.08, 0.0, 0.01))
+    ctx.active_object.name = "Box"
+    ctx.active_object.viscoscope.role = 'SOLID'
+    folder = tmp_work / "export"
+    scene_path = folder / "scene.json"
+    assert bpy.ops.viscoscope.export_scene(filepath=str(scene_path)) == {'FINISHED'}
+    previous = _files(folder)
+    assert set(previous) == {"scene.json", "solid_Box.obj"}
+
+    ctx.scene.viscoscope.fluid.viscosity = 3.0
+    ctx.active_object.location.x = 0.09
+    (folder / (failing + ".partial")).symlink_to("/dev/full")
+    with pytest.raises(RuntimeError) as raised:
+        bpy.ops.viscoscope.export_scene(filepath=str(scene_path))
+    message = str(raised.value).strip()
+    assert "cannot write %s: No space left on device" % (folder / failing) in message and "\n" not in message
+    assert _files(folder)[failing] == previous[failing]
+    assert not [name for name in os.listdir(folder) if name.endswith(".partial")]
+
+
+def test_a_nan_in_the_camera_is_refused_and_the_previous_camera_file_stands(ctx, tmp_work):
+    """A NaN from a script or driver used to stop json.dump halfway through the file, with a traceback."""
+    bpy.ops.object.camera_add(location=(0, -0.5, 0.1), rotation=(math.radians(80), 0, 0))
+    ctx.scene.viscoscope.camera = ctx.active_object
+    path = tmp_work / "blender_camera.json"
+    assert bpy.ops.viscoscope.export_camera() == {'FINISHED'}
+    previous = path.read_bytes()
+    ctx.active_object.data.shift_x = float("nan")
+    with pytest.raises(RuntimeError) as raised:
+        bpy.ops.viscoscope.export_camera()
+    message = str(raised.value).strip()
+    assert "camera shift_x must be a finite number" in message and "\n" not in message
+    assert path.read_bytes() == previous and os.listdir(tmp_work) == ["blender_camera.json"]
