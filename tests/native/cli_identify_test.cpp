@@ -2,9 +2,8 @@
 // killed with SIGKILL between generations resumes to the same result as an uninterrupted run;
 // SIGTERM checkpoints and exits 3; progress is JSON lines with the fields the add-on reads. Under
 // mpirun, ranks share the evaluations and the result is the single process's.
-// Tiny problem: 16³ (coarse 11³) grid, 2–3 reference frames, λ = 4, 2–3 generations. The reference
-// masks here are hand-drawn PGM rectangles (this test links no OpenCV); identify_loop_test checks
-// the recovered viscosity on a simulated reference.
+// The problem is cli_support.h's slump, with 2–3 generations; identify_loop_test checks the
+// recovered viscosity on a simulated reference.
 #include "cli_support.h"
 
 #include <gtest/gtest.h>
@@ -32,6 +31,7 @@ using viscoscope::cli_test::CommandResult;
 using viscoscope::cli_test::runCommand;
 using viscoscope::cli_test::runViscoscope;
 using viscoscope::cli_test::slurp;
+using namespace viscoscope::cli_test::slump;
 
 class CliIdentify : public ::testing::Test {
 protected:
@@ -40,76 +40,11 @@ protected:
         dir_ = fs::temp_directory_path() / ("viscoscope_cli_identify_" + test + "_" + std::to_string(getpid()));
         fs::remove_all(dir_);
         fs::create_directories(dir_);
-        const json scene{{"format", "viscoscope.scene"},
-                         {"version", 1},
-                         {"domain", {{"min", {0, 0, 0}}, {"max", {0.1, 0.04, 0.06}}, {"resolution", 16}}},
-                         {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
-                         {"liquids", {{{"type", "box"}, {"min", {0.0, 0.0, 0.0}}, {"max", {0.035, 0.04, 0.045}}}}},
-                         {"material", {{"density", 1400}, {"viscosity", 5.0}}},
-                         {"fps", 30},
-                         {"frames", 4},
-                         {"seed", 1}};
-        std::ofstream(dir_ / "scene.json") << scene.dump(1);
-        writeCamera(dir_ / "camera.json", {-0.05, 0.03, 0.25});
-        writeReference(dir_ / "reference", 96, 64, {1.0, 1.0});
+        writeSlumpCase(dir_);
     }
     void TearDown() override { fs::remove_all(dir_); }
 
-    static void writeCamera(const fs::path& file, const std::vector<double>& t) {
-        const json camera{{"format", "viscoscope.camera"}, {"version", 1}, {"width", 96}, {"height", 64},
-                          {"K", {{200, 0, 47.5}, {0, 200, 25.5}, {0, 0, 1}}},
-                          {"distortion", {0, 0, 0, 0, 0}},
-                          {"R", {{1, 0, 0}, {0, 0, -1}, {0, 1, 0}}},
-                          {"t", t}};
-        std::ofstream(file) << camera.dump();
-    }
-
-    // Masks of a liquid block slumping to the right, as binary PGM (P5) files, frames 2 and 4.
-    static void writeReference(const fs::path& dir, int width, int height, const std::vector<double>& weights) {
-        fs::create_directories(dir / "masks");
-        json manifest{{"format", "viscoscope.reference"}, {"version", 1}, {"source", "hand-drawn"}, {"fps", 30.0},
-                      {"width", width}, {"height", height}};
-        std::vector<int> frames;
-        std::vector<double> times;
-        std::vector<std::string> masks;
-        for (size_t i = 0; i < weights.size(); ++i) {
-            const int frame = 2 * static_cast<int>(i + 1);
-            const std::string name = "masks/mask_" + std::to_string(frame) + ".pgm";
-            std::ofstream pgm(dir / name, std::ios::binary);
-            pgm << "P5\n" << width << " " << height << "\n255\n";
-            for (int y = 0; y < height; ++y)
-                for (int x = 0; x < width; ++x) {
-                    const bool inside = x > width * 0.2 && x < width * (0.5 + 0.05 * frame) && y > height * 0.4 &&
-                                        y < height * 0.75;
-                    pgm.put(static_cast<char>(inside ? 255 : 0));
-                }
-            frames.push_back(frame);
-            times.push_back(frame / 30.0);
-            masks.push_back(name);
-        }
-        manifest["frames"] = frames;
-        manifest["times_s"] = times;
-        manifest["weights"] = weights;
-        manifest["masks"] = masks;
-        std::ofstream(dir / "manifest.json") << manifest.dump(1);
-    }
-
-    json job(int generations = 2) const {
-        return {{"format", "viscoscope.job"},
-                {"version", 1},
-                {"scene", "scene.json"},
-                {"camera", "camera.json"},
-                {"video", nullptr},
-                {"silhouettes", "reference"},
-                {"frame_start", 1},
-                {"frame_end", 250},
-                {"parameters", {{{"name", "viscosity"}, {"initial", 5.0}, {"spread", 5.0}, {"min", 1e-3}, {"max", 1e4},
-                                 {"log", true}}}},
-                {"resolution", 16},
-                {"max_generations", generations},
-                {"fidelity", {{"coarse_generations", 1}}},
-                {"seed", 4}};
-    }
+    json job(int generations = 2) const { return slumpJob(generations); }
 
     fs::path writeJob(const json& doc, const std::string& name = "job.json") const {
         std::ofstream(dir_ / name) << doc.dump(1);
@@ -169,7 +104,7 @@ protected:
 
 TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
     {  // no reference frames: all ω_f = 0
-        writeReference(dir_ / "reference_unweighted", 96, 64, {0.0, 0.0});
+        writeSlumpMasks(dir_ / "reference_unweighted", 96, 64, {0.0, 0.0});
         json doc = job();
         doc["silhouettes"] = "reference_unweighted";
         expectBadInput(writeJob(doc, "no_frames.json"), "no reference frames");
@@ -195,23 +130,23 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         expectBadInput(writeJobText(nan, "nan.json"), "not valid JSON");
     }
     {  // the reference image has another size than the camera
-        writeReference(dir_ / "reference_small", 48, 32, {1.0, 1.0});
+        writeSlumpMasks(dir_ / "reference_small", 48, 32, {1.0, 1.0});
         json doc = job();
         doc["silhouettes"] = "reference_small";
         expectBadInput(writeJob(doc, "size.json"), "reference masks");
     }
     {  // a camera that sees no liquid (it is behind the camera)
-        writeCamera(dir_ / "camera_away.json", {-0.05, 0.03, -0.25});
+        writeSlumpCamera(dir_ / "camera_away.json", {-0.05, 0.03, -0.25});
         json doc = job();
         doc["camera"] = "camera_away.json";
         expectBadInput(writeJob(doc, "away.json"), "sees none of the liquid");
     }
     {  // a camera that sees only the block's top, compared after the block has slumped out of its view:
        // the message says what was compared, since the time offset or fps is the likelier cause
-        writeCamera(dir_ / "camera_top.json", {-0.05, 0.087, 0.25});
+        writeSlumpCamera(dir_ / "camera_top.json", {-0.05, 0.087, 0.25});
         std::vector<double> weights(30, 0.0);
         weights[14] = weights[29] = 1.0;  // frames 30 and 60
-        writeReference(dir_ / "reference_late", 96, 64, weights);
+        writeSlumpMasks(dir_ / "reference_late", 96, 64, weights);
         json doc = job();
         doc["camera"] = "camera_top.json";
         doc["silhouettes"] = "reference_late";

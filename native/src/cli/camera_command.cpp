@@ -1,6 +1,7 @@
 // `viscoscope camera convert|pnp|calibrate`: camera JSON from Blender, clicked points or checkerboards.
 #include "cli/commands.h"
 #include "camera/camera.h"
+#include "observe/observe.h"
 #include "scene/scene.h"
 
 #include <nlohmann/json.hpp>
@@ -69,7 +70,7 @@ int runPnp(const CameraArguments& args) {
 int runCalibrate(const CameraArguments& args) {
     std::vector<cv::Mat> images;
     for (const std::string& file : args.images) {
-        images.push_back(cv::imread(file, cv::IMREAD_GRAYSCALE));
+        images.push_back(readImage(file, cv::IMREAD_GRAYSCALE));
         if (images.back().empty()) throw InputError(file + ": cannot read image");
     }
     const CheckerboardCalibration result = calibrateFromCheckerboards(images, parsePattern(args.pattern), args.squareSize);

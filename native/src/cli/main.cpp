@@ -1,7 +1,9 @@
 // Entry point: registers the sub-commands, installs the cancel signal handlers, and maps errors to
-// exit codes (0 ok, 2 bad input with a one-line reason, 3 cancelled, 1 a failed write or an internal error).
+// exit codes (0 ok, 2 bad input with a one-line reason, 3 cancelled, 1 a failed write, a diverged
+// simulation or an internal error).
 #include "cli/commands.h"
 #include "scene/scene.h"
+#include "sim/sim.h"
 
 #include <csignal>
 #include <iostream>
@@ -51,6 +53,9 @@ int main(int argc, char** argv) {
         return cli::kExitCancelled;
     } catch (const OutputError& e) {
         std::cerr << "viscoscope: " << e.what() << "\n";  // the disk's or the folder's fault, not the engine's
+        return cli::kExitInternal;
+    } catch (const sim::Diverged& e) {
+        std::cerr << "viscoscope: " << e.what() << "\n";
         return cli::kExitInternal;
     } catch (const std::exception& e) {
         std::cerr << "viscoscope: internal error: " << e.what() << "\n";

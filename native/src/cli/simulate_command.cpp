@@ -6,6 +6,7 @@
 
 #include "cli/commands.h"
 #include "cli/output_lock.h"
+#include "scene/digest.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -17,8 +18,10 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <iterator>
 #include <optional>
 #include <regex>
+#include <sstream>
 #include <stdexcept>
 #include <vector>
 
@@ -127,16 +130,19 @@ struct RunRecord {
 
 void saveResumeState(const std::filesystem::path& dir, const RunRecord& record, double wallSeconds,
                      const sim::Simulation& simulation) {
-    const nlohmann::json header{{"format", "viscoscope.resume"}, {"version", 1}, {"engine_build", engineBuild()},
-                                {"scene", record.scene},
-                                {"frames", record.frames}, {"initial_volume", record.initialVolume},
-                                {"wall_seconds", wallSeconds}};
-    const std::string text = header.dump();
+    std::ostringstream stateBytes(std::ios::binary);
+    simulation.saveState(stateBytes);
+    const std::string state = stateBytes.str();
+    // Sealed, with the state's digest: a damaged copy starts over instead of resuming from garbage.
+    const std::string text = sealed({{"format", "viscoscope.resume"}, {"version", 1}, {"engine_build", engineBuild()},
+                                     {"scene", record.scene},
+                                     {"frames", record.frames}, {"initial_volume", record.initialVolume},
+                                     {"wall_seconds", wallSeconds}, {"state_digest", Digest().add(state).hex()}})
+                                 .dump();
     writeFileAtomically(dir / kResumeFile, [&](std::ostream& out) {  // a kill mid-write leaves the last one whole
         const uint64_t length = text.size();
         out.write(reinterpret_cast<const char*>(&length), sizeof length);
-        out << text;
-        simulation.saveState(out);
+        out << text << state;
     });
 }
 
@@ -155,8 +161,10 @@ std::optional<RunRecord> resumeRun(const std::filesystem::path& dir, const Scene
             in.read(text.data(), std::streamsize(length));
         }
         const nlohmann::json header = nlohmann::json::parse(text, nullptr, false);
-        if (header.is_discarded() || header.value("format", "") != "viscoscope.resume")
-            throw InputError("not a resume file");
+        const std::string state{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+        if (!sealIsIntact(header) || header.value("format", "") != "viscoscope.resume" ||
+            header.value("state_digest", "") != Digest().add(state).hex())
+            throw InputError("damaged, or not a resume file");
         RunRecord record{header.at("scene"), header.at("frames"), header.at("initial_volume").get<double>(),
                          header.at("wall_seconds").get<double>()};
         if (record.scene.dump() != sceneToJson(scene).dump()) {
@@ -167,7 +175,8 @@ std::optional<RunRecord> resumeRun(const std::filesystem::path& dir, const Scene
             progress.warn(file.string() + " was written by another build of the engine; starting over");
             return std::nullopt;
         }
-        simulation.restoreState(in);
+        std::istringstream stateIn(state, std::ios::binary);
+        simulation.restoreState(stateIn);
         return record;
     } catch (const std::exception& e) {
         progress.warn(file.string() + ": cannot resume from it (" + e.what() + "); starting over");

@@ -157,7 +157,7 @@ bool runBlender(const fs::path& blender, const fs::path& script, const fs::path&
 // sensor's pixel collects it (averaging sRGB values darkens mixed pixels, so a dark liquid on a
 // bright backdrop came out with a fatter outline: 10 % more reference area at η = 100).
 cv::Mat cameraPicture(const fs::path& file, const PinholeCamera& big, cv::Size size) {
-    const cv::Mat image = cv::imread(file.string(), cv::IMREAD_COLOR);
+    const cv::Mat image = readImage(file, cv::IMREAD_COLOR);
     if (image.cols != big.width || image.rows != big.height)
         throw std::runtime_error(file.string() + ": Blender's render is missing or not " + std::to_string(big.width) +
                                  "x" + std::to_string(big.height));
@@ -278,7 +278,7 @@ int runSynth(const SynthArguments& args) {
     auto keepIfWhole = [&](const fs::path& image) {
         if (sameRender && fs::exists(image)) {
             // A render cut off while Blender wrote it does not decode whole.
-            const cv::Mat picture = cv::imread(image.string(), cv::IMREAD_COLOR);
+            const cv::Mat picture = readImage(image, cv::IMREAD_COLOR);
             if (picture.cols == big.width && picture.rows == big.height) return void(++kept);
         }
         fs::remove(image, ec);

@@ -133,8 +133,8 @@ constexpr double kFineTimeMargin = 1.15;
 // Closer than this in ln θ (0.3 %), a parabolic proposal repeats an evaluation (see parabolicProposal).
 constexpr double kProposalSpacing = 3e-3;
 // Version 2 tags every evaluation with its fidelity (version 1 told them apart by resolution);
-// version 3 adds the silhouettes' area track to E by default.
-constexpr int kCheckpointVersion = 3;
+// version 3 adds the silhouettes' area track to E by default; version 4 is sealed (digest.h).
+constexpr int kCheckpointVersion = 4;
 constexpr const char* kCoarse = "coarse";
 constexpr const char* kFull = "full";
 
@@ -601,9 +601,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             throw InputError(checkpointFile.string() + ": unreadable checkpoint (" + e.what() +
                              "); delete it or use another --out");
         }
-        if (cp.value("version", 0) != kCheckpointVersion)
-            throw InputError(checkpointFile.string() + ": checkpoint of an older Viscoscope (version " +
-                             std::to_string(cp.value("version", 0)) + "); delete it or use another --out");
+        const json version = cp.is_object() ? cp.value("version", json()) : json();
+        if (version != json(kCheckpointVersion))
+            throw InputError(checkpointFile.string() + ": checkpoint of another Viscoscope (version " + version.dump() +
+                             "); delete it or use another --out");
+        if (!sealIsIntact(cp))
+            throw InputError(checkpointFile.string() + ": damaged or edited checkpoint (its content_digest does not "
+                                                       "match its content); delete it or use another --out");
         if (cp.value("fingerprint", "") != print)
             throw InputError(checkpointFile.string() + ": checkpoint of a different job (or changed scene, camera, "
                                                        "reference); use another --out or delete it");
@@ -724,7 +728,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 {"elapsed_s", elapsedBefore + std::chrono::duration<double>(now - sessionStart).count()},
                 {"stop", stop ? json(toString(*stop)) : json()},
                 {"alignment_check", alignmentScores}};
-        writeJsonAtomically(cp, checkpointFile);
+        writeJsonAtomically(sealed(cp), checkpointFile);
     };
 
     while (!stop) {

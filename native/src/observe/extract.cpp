@@ -267,7 +267,7 @@ cv::Mat1b exclusionMask(const ExtractionOptions& options, cv::Size frameSize) {
     cv::Mat1b excluded(frameSize, uchar(0));
     if (options.excludeMask) {
         const std::string file = options.excludeMask->string();
-        const cv::Mat image = cv::imread(file, cv::IMREAD_GRAYSCALE);
+        const cv::Mat image = readImage(file, cv::IMREAD_GRAYSCALE);
         if (image.empty()) throw InputError(file + ": cannot read exclusion mask");
         if (image.size() != frameSize)
             throw InputError(file + ": exclusion mask is " + std::to_string(image.cols) + "x" +
@@ -287,7 +287,7 @@ cv::Mat1b exclusionMask(const ExtractionOptions& options, cv::Size frameSize) {
 void learnBackground(SilhouetteExtractor& extractor, const fs::path& source, const ExtractionOptions& options,
                      cv::Size frameSize) {
     if (options.cleanPlate) {
-        const cv::Mat plate = cv::imread(options.cleanPlate->string(), cv::IMREAD_COLOR);
+        const cv::Mat plate = readImage(*options.cleanPlate, cv::IMREAD_COLOR);
         if (plate.empty()) throw InputError(options.cleanPlate->string() + ": cannot read clean plate");
         if (plate.size() != frameSize) throw InputError(options.cleanPlate->string() + ": clean plate size differs from the frames'");
         extractor.learnCleanPlate(plate);

@@ -1,5 +1,6 @@
 #include "observe/frame_source.h"
 
+#include "observe/observe.h"
 #include "scene/scene.h"
 
 #include <opencv2/imgcodecs.hpp>
@@ -89,7 +90,7 @@ bool FrameSource::read(cv::Mat& frame) {
     } else {
         if (next_ >= static_cast<int>(images_.size())) return false;
         const std::filesystem::path& file = images_[next_];
-        frame = cv::imread(file.string(), cv::IMREAD_COLOR);
+        frame = readImage(file, cv::IMREAD_COLOR);
         if (frame.empty()) throw InputError(file.string() + ": cannot read image");
         if (!frameSize_.empty() && frame.size() != frameSize_)
             throw InputError(file.string() + ": image size differs from the first image's");

@@ -82,7 +82,7 @@ std::vector<T> arrayField(const nlohmann::json& doc, const std::string& name, co
 }
 
 cv::Mat1b readMaskImage(const fs::path& file, int width, int height) {
-    const cv::Mat image = cv::imread(file.string(), cv::IMREAD_GRAYSCALE);
+    const cv::Mat image = readImage(file, cv::IMREAD_GRAYSCALE);
     if (image.empty()) throw InputError(file.string() + ": missing or unreadable mask");
     if (image.cols != width || image.rows != height)
         throw InputError(file.string() + ": mask is " + std::to_string(image.cols) + "x" + std::to_string(image.rows) +

@@ -28,6 +28,9 @@ namespace viscoscope {
 cv::Mat srgbToLinear(const cv::Mat& image);  // 8-bit sRGB → float in [0, 1], same channels
 cv::Mat linearToSrgb(const cv::Mat& image);  // float in [0, 1] → 8-bit sRGB, rounded
 
+// The image in `file` decoded with cv::imread's `flags`; empty when the file is missing, empty or
+// not a whole image. OpenCV's own complaint is not printed: the caller names the file and the problem.
+cv::Mat readImage(const std::filesystem::path& file, int flags);
 // Encodes `image` in the format of `file`'s extension and writes it whole or not at all (OpenCV's
 // imwrite does not report a full disk). Throws OutputError.
 void writeImage(const cv::Mat& image, const std::filesystem::path& file);

@@ -1,5 +1,7 @@
 #include "scene/digest.h"
 
+#include <nlohmann/json.hpp>
+
 #include <cstdio>
 #include <fstream>
 #include <stdexcept>
@@ -26,6 +28,24 @@ std::string fileDigest(const std::filesystem::path& file) {
     while (in.read(buffer.data(), std::streamsize(buffer.size())) || in.gcount() > 0)
         digest.add(std::string_view(buffer.data(), static_cast<size_t>(in.gcount())));
     return digest.hex();
+}
+
+namespace {
+constexpr const char* kSealKey = "content_digest";
+}  // namespace
+
+nlohmann::json sealed(nlohmann::json doc) {
+    doc.erase(kSealKey);
+    const std::string digest = Digest().add(doc.dump()).hex();
+    doc[kSealKey] = digest;
+    return doc;
+}
+
+bool sealIsIntact(const nlohmann::json& doc) {
+    if (!doc.is_object() || !doc.contains(kSealKey)) return false;
+    nlohmann::json rest = doc;
+    rest.erase(kSealKey);
+    return doc.at(kSealKey) == nlohmann::json(Digest().add(rest.dump()).hex());
 }
 
 }  // namespace viscoscope

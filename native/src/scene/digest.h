@@ -3,6 +3,8 @@
 // with a library's version: checkpoints and simulation folders store it to recognise their run.
 #pragma once
 
+#include <nlohmann/json_fwd.hpp>
+
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -21,5 +23,11 @@ private:
 
 // The digest of a file's bytes. Throws std::runtime_error when it cannot be read.
 std::string fileDigest(const std::filesystem::path& file);
+
+// A machine file that carries the digest of the rest of itself (its "content_digest"), so that its
+// reader tells a damaged or hand-edited copy from what was written and refuses it whole, instead of
+// failing on whichever value it reads first. `doc` must be an object.
+nlohmann::json sealed(nlohmann::json doc);
+bool sealIsIntact(const nlohmann::json& doc);
 
 }  // namespace viscoscope

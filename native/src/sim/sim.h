@@ -17,6 +17,7 @@
 #include <memory>
 #include <optional>
 #include <random>
+#include <stdexcept>
 #include <vector>
 
 namespace viscoscope {
@@ -48,6 +49,13 @@ struct StepStats {
     double dt = 0;
     SolveStats solve;
     double transferSeconds = 0, solveSeconds = 0, otherSeconds = 0;
+};
+
+// A run whose particles left the real numbers: its scene asks for more than the time step can
+// carry. Not bad input the reader could have refused, and not a fault of the engine's.
+class Diverged : public std::runtime_error {
+public:
+    using std::runtime_error::runtime_error;
 };
 
 // A share of the liquid lost (out of the domain, or into a solid) that makes a run's result

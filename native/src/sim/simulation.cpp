@@ -1062,7 +1062,10 @@ FrameStats Simulation::advanceFrame() {
     ++frame_;
     computeFractions();  // so that the frame's volume and weights describe its end state
     for (const Vec3& x : particles_.position)
-        if (!x.allFinite()) throw std::runtime_error("simulation became non-finite at frame " + std::to_string(frame_));
+        if (!x.allFinite())
+            throw Diverged("the simulation diverged at frame " + std::to_string(frame_) +
+                           " (a particle's position is no longer a number): lower the CFL number, or check η, σ, "
+                           "gravity and the emitters");
     stats.frame = frame_;
     stats.simulatedTime = time_;
     stats.liquidVolume = liquidVolume();
