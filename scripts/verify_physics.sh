@@ -3,5 +3,5 @@
 # grids, at the sizes the figures in the issue notes quote. Prints the figures; takes ~30 minutes.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh engine
+bash scripts/setup.sh tests
 VISCOSCOPE_FULL_VERIFICATION=1 build/tests/native/sim_physics_test --gtest_also_run_disabled_tests

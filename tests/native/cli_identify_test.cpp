@@ -115,6 +115,11 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         doc["parameters"][0]["max"] = 10.0;
         expectBadInput(writeJob(doc, "bounds.json"), "lower 100 > upper 10");
     }
+    {  // a generation of a million simulations, which would never end
+        json doc = job();
+        doc["population"] = 1000000;
+        expectBadInput(writeJob(doc, "population.json"), "population: must be in [0, 1000], got 1000000");
+    }
     {  // a spread wider than the whole interval, which the search would clip without a word
         json doc = job();
         doc["parameters"][0]["spread"] = 1e308;

@@ -1,12 +1,15 @@
 // `viscoscope simulate` as a user runs it: a small scene end to end, bad scenes (exit 2 with one
 // line naming the field), cancellation by SIGTERM (exit 3, no completion marker) and resuming.
 #include "cli_support.h"
+#include "scene/digest.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -112,6 +115,32 @@ TEST_F(SimulateCommand, BadScenesExitTwoWithOneLineNamingTheField) {
         EXPECT_NE(r.err.find(c.mentions), std::string::npos) << r.err;
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
         EXPECT_FALSE(fs::exists(dir_ / "out/simulation.json"));
+    }
+    {  // a million frames at one per 1000 s: years of flow at any step gravity allows, refused at once
+        json scene = smallScene();
+        scene["domain"]["resolution"] = 48;
+        scene["frames"] = 1000000;
+        scene["fps"] = 0.001;
+        const CommandResult r = simulate(write(scene).string() + " --out " + (dir_ / "out").string(), dir_);
+        EXPECT_EQ(r.exitCode, 2) << r.err;
+        EXPECT_NE(r.err.find("scene.json: frames / fps: 1000000 frames at 0.001 fps are 1e+09 s of flow, at least "),
+                  std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("(--ignore-limits runs it anyway)"), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+    {  // a cup a hundred times wider than the domain is taken for one in another unit, unless waived
+        json scene = smallScene();
+        scene["solids"][1]["inner_radius"] = 10.0;
+        const fs::path file = write(scene);
+        const CommandResult refused = viscoscope::cli_test::runViscoscope("check " + file.string(), dir_);
+        EXPECT_EQ(refused.exitCode, 2) << refused.err;
+        EXPECT_NE(refused.err.find("is it in another unit? (--ignore-limits runs it anyway)"), std::string::npos)
+            << refused.err;
+        for (const std::string& arguments :
+             {"--ignore-limits check " + file.string(), "check " + file.string() + " --ignore-limits"}) {
+            const CommandResult waived = viscoscope::cli_test::runViscoscope(arguments, dir_);
+            EXPECT_EQ(waived.exitCode, 0) << arguments << ": " << waived.err;
+        }
     }
     {  // a hole far narrower than a cell, which the hole calibration's box cannot hold: the message
        // names the scene's cup and field, not the calibration's own box (after the resolution warning)
@@ -322,11 +351,20 @@ TEST_F(SimulateCommand, ACompletedRunIsKeptUnlessAFrameOrTheEngineBuildDiffers) 
     endless["frames"] = 100000;
     const std::string endlessPath = write(endless).string();
     ASSERT_EQ(simulateUntil(endlessPath, dir_ / "cut", dir_ / "cut/particles_00002.bin"), 3);
-    std::string state = viscoscope::cli_test::slurp(dir_ / "cut/resume.state");
-    const size_t at = state.find(build);
-    ASSERT_NE(at, std::string::npos);
-    state.replace(at, build.size(), std::string(16, '0'));
-    std::ofstream(dir_ / "cut/resume.state", std::ios::binary) << state;
+    {  // the state as another build would seal it: its header (after its length) names that build
+        const std::string state = viscoscope::cli_test::slurp(dir_ / "cut/resume.state");
+        uint64_t length = 0;
+        std::memcpy(&length, state.data(), sizeof length);
+        json header = json::parse(state.substr(sizeof length, length));
+        const std::string simulationState = state.substr(sizeof length + length);
+        ASSERT_EQ(header.at("engine_build"), build);
+        header["engine_build"] = std::string(16, '0');
+        const std::string text = viscoscope::sealed(header).dump();
+        length = text.size();
+        std::ofstream out(dir_ / "cut/resume.state", std::ios::binary);
+        out.write(reinterpret_cast<const char*>(&length), sizeof length);
+        out << text << simulationState;
+    }
     // (Frame 30 is beyond where the cut run stopped, so only the second run writes it.)
     ASSERT_EQ(simulateUntil(endlessPath, dir_ / "cut", dir_ / "cut/particles_00030.bin"), 3);
     const std::string err = viscoscope::cli_test::slurp(dir_ / "cut.stderr");

@@ -21,6 +21,11 @@ int main(int argc, char** argv) {
     CLI::App app{"Viscoscope: identify a liquid's viscosity from video, and simulate it."};
     app.set_version_flag("--version", std::string(VISCOSCOPE_VERSION));
     app.require_subcommand(1);
+    bool ignoreLimits = false;
+    app.add_flag("--ignore-limits", ignoreLimits,
+                 "Run what looks like a mistake of scale anyway: a grid larger than this machine's memory, a run of "
+                 "over a month, a domain over 1 km or a solid 100 times larger than it");
+    app.fallthrough();  // so that it may follow the command's name, as the other options do
 
     const std::vector<cli::Command> commands{
         cli::addSimulateCommand(app),
@@ -42,6 +47,7 @@ int main(int argc, char** argv) {
     }
 
     try {
+        if (ignoreLimits) waiveScaleLimits();
         for (const cli::Command& command : commands)
             if (command.sub->parsed()) return command.run();
         return cli::kExitBadInput;

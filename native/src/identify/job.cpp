@@ -34,15 +34,20 @@ double optionalNumber(const nlohmann::json& doc, const std::string& key, double 
 }
 
 int optionalInt(const nlohmann::json& doc, const std::string& key, int fallback, int minimum,
-                const std::string& origin) {
+                const std::string& origin, int maximum = 1000000000) {
     if (!doc.contains(key) || doc.at(key).is_null()) return fallback;
     const nlohmann::json& value = doc.at(key);
     if (!value.is_number_integer()) throw InputError(origin + ": " + key + ": must be an integer");
     const long long v = value.get<long long>();
-    if (v < minimum || v > 1000000000)
-        throw InputError(origin + ": " + key + ": must be ≥ " + std::to_string(minimum) + ", got " + value.dump());
+    if (v < minimum || v > maximum)
+        throw InputError(origin + ": " + key + ": must be in [" + std::to_string(minimum) + ", " +
+                         std::to_string(maximum) + "], got " + value.dump());
     return static_cast<int>(v);
 }
+
+// CMA-ES samples 4 + 3 ln n a generation; a thousand is far past any use, and a million is a
+// generation that never ends.
+constexpr int kMaxPopulation = 1000;
 
 std::optional<std::string> optionalString(const nlohmann::json& doc, const std::string& key, const std::string& origin) {
     if (!doc.contains(key) || doc.at(key).is_null()) return std::nullopt;
@@ -276,10 +281,10 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         }
     }
 
-    job.resolution = optionalInt(doc, "resolution", job.scene.domain.resolution, 4, origin);
+    job.resolution = optionalInt(doc, "resolution", job.scene.domain.resolution, kMinResolution, origin, kMaxResolution);
     job.maxGenerations = optionalInt(doc, "max_generations", 80, 1, origin);
     job.seed = static_cast<std::uint64_t>(optionalInt(doc, "seed", 1, 0, origin));
-    job.populationSize = optionalInt(doc, "population", 0, 0, origin);
+    job.populationSize = optionalInt(doc, "population", 0, 0, origin, kMaxPopulation);
     if (job.populationSize == 1) throw InputError(origin + ": population: must be ≥ 2 (or 0 for the default)");
     job.toleranceX = optionalNumber(doc, "tolerance_x", job.toleranceX, origin);
     job.toleranceFun = optionalNumber(doc, "tolerance_fun", job.toleranceFun, origin);

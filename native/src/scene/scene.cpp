@@ -157,10 +157,10 @@ void requireInDomain(const FieldReader& r, const Solid& solid, const Domain& d) 
     if (const auto* cup = std::get_if<CupSolid>(&solid)) {
         const double outer = cup->innerRadius + cup->wallThickness;
         const double across = 2 * outer, domainSide = (d.max - d.min).maxCoeff();
-        if (across > kMaxSolidOverDomain * domainSide)
+        if (across > kMaxSolidOverDomain * domainSide && !scaleLimitsWaived())
             r.fail("inner_radius", "the cup is " + formatNumber(across) + " m across, over " +
                                        formatNumber(kMaxSolidOverDomain) + " times the domain's longest side (" +
-                                       formatNumber(domainSide) + " m); is it in another unit?");
+                                       formatNumber(domainSide) + " m); is it in another unit?" + kWaiveHint);
         const Vec3 lo = cup->position - Vec3(outer, outer, 0);
         const Vec3 hi = cup->position + Vec3(outer, outer, cup->bottomThickness + cup->height);
         requireBoxMeetsDomain(r, "position", lo, hi, d);
@@ -326,10 +326,11 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     scene.domain.min = domain.vec3("min");
     scene.domain.max = domain.vec3("max");
     requireOrderedBox(domain, scene.domain.min, scene.domain.max);
-    if ((scene.domain.max - scene.domain.min).maxCoeff() > kMaxDomainSide)
+    if ((scene.domain.max - scene.domain.min).maxCoeff() > kMaxDomainSide && !scaleLimitsWaived())
         domain.fail("max", "the domain is " + formatNumber((scene.domain.max - scene.domain.min).maxCoeff()) +
-                               " m long, more than " + formatNumber(kMaxDomainSide) + " m; is it in another unit?");
-    scene.domain.resolution = domain.integer("resolution", 4, 1024);
+                               " m long, more than " + formatNumber(kMaxDomainSide) + " m; is it in another unit?" +
+                               kWaiveHint);
+    scene.domain.resolution = domain.integer("resolution", kMinResolution, kMaxResolution);
     if (domain.has("periodic")) {
         const json& p = domain.raw("periodic");
         if (!p.is_array() || p.size() != 3 || !p[0].is_boolean() || !p[1].is_boolean() ||

@@ -47,9 +47,21 @@ bool cancelRequested() noexcept;
 // Throws Cancelled("WHAT cancelled") once a cancel was requested.
 void throwIfCancelled(const char* what);
 
+// The refusals of what is probably a mistake of scale rather than a liquid (a domain over
+// kMaxDomainSide, a solid over kMaxSolidOverDomain times the domain, a grid larger than this
+// machine's memory, a run longer than a month at its fastest) can be waived on purpose with
+// `--ignore-limits`: one choice for the whole process, as the cancel request is. Each such refusal
+// ends with kWaiveHint.
+void waiveScaleLimits() noexcept;
+bool scaleLimitsWaived() noexcept;
+inline constexpr const char* kWaiveHint = " (--ignore-limits runs it anyway)";
+
 using Vec3 = Eigen::Vector3d;
 
 inline constexpr int kSceneFormatVersion = 1;
+
+// Cells along a domain's longest side.
+inline constexpr int kMinResolution = 4, kMaxResolution = 1024;
 
 struct Domain {
     Vec3 min{0, 0, 0};

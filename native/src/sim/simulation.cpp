@@ -183,17 +183,37 @@ bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, 
 constexpr double kBaseBytes = 110e6;
 constexpr double kBytesPerCell = 470;
 
-// A grid that cannot fit in this machine's memory is refused before anything is allocated, rather
-// than failing with bad_alloc (or the kernel's OOM killer) part way through.
-void requireMemoryFor(const Scene& scene, const Grid& grid) {
+// A lower bound on the cost of a step on any machine: the per-step passes over every cell (fractions,
+// transfers, the solve's set-up) take at least this; this machine takes ~50 times more (FINDINGS).
+constexpr double kLeastSecondsPerCellStep = 20e-9;
+constexpr double kMaxRunSeconds = 30 * 86400.0;
+
+// What this machine cannot run is refused before anything is allocated: a grid larger than its
+// memory (rather than bad_alloc, or the kernel's OOM killer, part way through), and a run that would
+// take over a month even at the largest step gravity allows (stableTimeStep: CFL·√(Δx/g)), which
+// is a duration or fps in another unit.
+void requireRunFits(const Scene& scene, const Grid& grid) {
+    if (scaleLimitsWaived()) return;
     const double cells = double(grid.cells[0]) * grid.cells[1] * grid.cells[2];
     const double needed = kBaseBytes + kBytesPerCell * cells;
     const double available = double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGE_SIZE));
+    std::ostringstream text;
+    text << std::setprecision(3) << scene.sourceFile.filename().string() << ": ";
     if (available > 0 && needed > available) {
-        std::ostringstream text;
-        text << std::setprecision(3) << scene.sourceFile.filename().string() << ": domain.resolution "
-             << scene.domain.resolution << ": " << cells << " cells need about " << needed / 1e9
-             << " GB, more than this machine's " << available / 1e9 << " GB; lower the resolution";
+        text << "domain.resolution " << scene.domain.resolution << ": " << cells << " cells need about "
+             << needed / 1e9 << " GB, more than this machine's " << available / 1e9 << " GB; lower the resolution"
+             << kWaiveHint;
+        throw InputError(text.str());
+    }
+    const double g = scene.gravity.norm();
+    if (!(g > 0)) return;
+    const double duration = scene.frames / scene.fps;
+    const double steps = duration / (scene.solver.cfl * std::sqrt(grid.dx / g));
+    const double seconds = steps * cells * kLeastSecondsPerCellStep;
+    if (seconds > kMaxRunSeconds) {
+        text << "frames / fps: " << scene.frames << " frames at " << scene.fps << " fps are " << duration
+             << " s of flow, at least " << steps << " steps on " << cells << " cells: over " << seconds / 86400
+             << " days on any machine; is the fps in another unit?" << kWaiveHint;
         throw InputError(text.str());
     }
 }
@@ -220,7 +240,7 @@ Grid sceneGrid(const Scene& scene) {
 
 Simulation::Simulation(const Scene& scene)
     : scene_(scene), grid_(sceneGrid(scene)), random_(scene.seed) {
-    requireMemoryFor(scene, grid_);
+    requireRunFits(scene, grid_);
     solids_ = std::make_unique<SolidField>(scene.solids, grid_);
     material_ = std::make_unique<MaterialLaw>(scene.material);
     solver_ = makeSolver(scene.solver.scheme == StokesScheme::Unified);

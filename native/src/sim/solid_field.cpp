@@ -68,9 +68,10 @@ void requireMeshFitsDomain(const TriangleMesh& mesh, const std::filesystem::path
     if ((hi.array() < domainLo.array()).any() || (lo.array() > domainHi.array()).any())
         throw InputError(where + ": its bounds " + bounds.str() + " lie outside the domain; is it in another unit?");
     const double ratio = (hi - lo).maxCoeff() / grid.extent().maxCoeff();
-    if (ratio > kMaxSolidOverDomain)
+    if (ratio > kMaxSolidOverDomain && !scaleLimitsWaived())
         throw InputError(where + ": its bounds " + bounds.str() + " are " + std::to_string(int(ratio)) +
-                         " times the domain's size; is it in millimetres? Scale it to metres, or crop it to the domain");
+                         " times the domain's size; is it in millimetres? Scale it to metres, or crop it to the domain" +
+                         kWaiveHint);
 }
 
 // OpenVDB's voxeliser polls this between its passes and stops on a cancel request.
