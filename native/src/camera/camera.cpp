@@ -215,10 +215,6 @@ SensorFit parseSensorFit(const JsonReader& in) {
     in.fail("sensor_fit", "must be \"AUTO\", \"HORIZONTAL\" or \"VERTICAL\"");
 }
 
-}  // namespace
-
-namespace {
-
 // Bounds past which a camera is a typo or a unit mistake, not a lens: a field of view outside
 // 0.1°–179°, an optical axis farther outside the image than Blender's lens shift can put it (10
 // image sizes), distortion no lens has, or a camera ten times farther away than a domain can be wide.

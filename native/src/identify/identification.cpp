@@ -536,13 +536,13 @@ json doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds, const Ident
             doubts.push_back(line.str());
             break;
         }
-    if (best) {  // checkpoints of older builds do not record these
+    if (best) {
         const std::string at = "the best evaluation (θ = " + best->at("theta").dump() + ")";
-        if (const double lost = best->value("liquid_lost", 0.0); lost > sim::kLostLiquidShare)
+        if (const double lost = best->at("liquid_lost").get<double>(); lost > sim::kLostLiquidShare)
             doubts.push_back(at + " lost " + std::to_string(int(100 * lost)) +
                              " % of its liquid (it left the domain or went into a solid), so θ* fits another amount "
                              "of liquid: check the domain, the solids and the fill");
-        if (const int unconverged = best->value("unconverged_frames", 0); unconverged > 0)
+        if (const int unconverged = best->at("unconverged_frames").get<int>(); unconverged > 0)
             doubts.push_back(at + " had " + std::to_string(unconverged) +
                              " frames whose pressure–viscosity solve stopped short of its tolerance: raise "
                              "solver.max_iterations");
