@@ -3,13 +3,13 @@
 fine as the Identify panel's, with another particle seed, and Cycles renders it with the opaque cup
 in view), then the panel's own operators with its defaults: Preview Silhouettes and Identify
 Viscosity, no mask drawn by hand. The cup hides the liquid inside it from the camera; a silhouette
-drawn as if it were glass made this return η = 346 Pa·s for a clip of 8, with an interval spanning
-the search bounds. Only the time budget and the generations are cut to fit CI.
+drawn as if it were glass made this return an η far too high, with an interval spanning the search
+bounds. Only the time budget and the generations are cut to fit CI.
 
-What it asks is what `scripts/sample.sh` gives at the same grid (60³: +9.4 %): η* within 15 % of the
-truth, an interval bounded by the footage, no doubts. It does not ask the interval to hold the truth:
-on this 24-frame clip the two grid placements' minima lie about 7.9 and 9.0 Pa·s apart, further than
-the alignment check's half-spacing move finds, and one run gave [8.28, 9.61] (tests/bench/FINDINGS.md)."""
+What it asks is what `scripts/sample.sh` gives at the same grid: η* within 15 % of the truth, an
+interval bounded by the footage, no doubts. It does not ask the interval to hold the truth: on this
+24-frame clip the two grid placements' minima lie further apart than the alignment check's
+half-spacing move finds. (Measured: tests/bench/FINDINGS.md, "What the camera sees (issue 62)".)"""
 
 import json
 import os

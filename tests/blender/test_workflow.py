@@ -1,7 +1,10 @@
 """The capture workflow's operators: reference video, camera match, identify (cancel + resume), results.
 
-Identification does not exist in the engine yet, so these run against the stand-in engine, which
-speaks the same progress / exit-code / checkpoint contract."""
+Most tests run the operators against the stand-in engine (conftest.FAKE_ENGINE), which speaks the
+engine's progress / exit-code / checkpoint contract at a pace the test sets, so that Cancel lands
+mid-run; those marked `engine` use the real one (extraction, the camera match, a simulate run for
+Load Hidden Fields, and the extraction Identify starts with). A whole identification through the
+real engine is in test_identify_real.py and test_capture_identify.py."""
 
 import json
 import math

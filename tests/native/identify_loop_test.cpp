@@ -1,7 +1,8 @@
 // The identification loop on a synthetic reference that avoids the inverse crime: the reference is
-// simulated at another resolution (24 vs 20/13) and particle seed (11 vs 3), its surface is meshed
-// and filled by the exact rasterizer into a camera of twice the resolution, and the masks are then
-// area-downsampled to the scoring camera's size (the identification uses the fast band splat).
+// simulated at another resolution (24 against the job's 20, or 16 where a test evaluates θ alone)
+// and particle seed (11 vs 3), its surface is meshed and filled by the exact rasterizer into a
+// camera of twice the resolution, and the masks are then area-downsampled to the scoring camera's
+// size (identify draws its own silhouettes with the same exact fill, its default, at that size).
 // Scene: a viscous column of 1400 kg/m³ liquid collapsing along x (front speed ∝ 1/η early on).
 #include "identify/identify.h"
 

@@ -109,19 +109,21 @@ TEST(ClipToSolidExterior, RemovesLiquidBelowTheGroundOnly) {
 // The liquid surface must lie where the liquid ends, whatever the grid: a surface reaching a fixed
 // fraction of a cell beyond it would draw a coarse simulation's streams and puddles wider than a
 // fine one's. Particles fill shapes of the sizes the sample cup shows: its stream (radius 2.4 cells
-// at 48³ and 3.2 at 64³; 1.2–1.7 cells at 48³ by its particles' volume at η = 1), the film on the
-// ground, the edge of a film one or two cells thick (the front of a spreading puddle), a drop, and
-// large bodies. They are placed as Simulation seeds them (jittered in sub-cells, 8 or 27 per cell)
-// and as they lie after flowing: in the sample cup's stream their nearest neighbours are 0.28 cells
-// away on average at 48³ and 96³, against 0.32 as seeded and 0.27 for independent uniform points,
-// which stand in for them. The surface is the half level of the density smoothed over σ = 0.375
-// cells (the default at 8 per cell). That holds a flat edge, and takes a stream of R cells in by
-// about σ²/2R (0.03–0.06 cells here). A film one cell thick is thinner than the kernel: its density
-// peaks at erf(0.5 / √2σ) ≈ 0.82, and its edge recedes until the fall-off across it halves that
-// peak, 0.105 cells; the test expects that figure there. Flowed particles are its weak case: their
-// random gaps leave holes in 3–5 % of a one-cell film (the sphere surface this replaced: 0.25 %)
-// and take its edge in by 0.27 cells, so for one-cell films they may move the surface by 0.2
-// cells from the seeded one and leave holes under 5 % of rays; elsewhere by 0.1 cells and 1 %.
+// at 48³ and 3.2 at 64³, and less where it narrows at 48³ and η = 1), the film on the ground,
+// the edge of a film one or two cells thick (the front of a spreading puddle), a drop, and large
+// bodies. They are placed as Simulation seeds them (jittered in sub-cells, 8 or 27 per cell) and as
+// they lie after flowing, for which independent uniform points stand in: in the sample cup's stream
+// their spacing is close to uniform points', not to the seeding's. The surface is the half level of
+// the density smoothed over σ = 0.375 cells (the default at 8 per cell). That holds a flat edge, and
+// takes a stream of R cells in by about σ²/2R (0.03–0.06 cells here). A film one cell thick is
+// thinner than the kernel: its density peaks at erf(0.5 / √2σ) ≈ 0.82, and its edge recedes until
+// the fall-off across it halves that peak, 0.105 cells; the test expects that figure there. Flowed
+// particles are its weak case: their random gaps leave holes in a one-cell film and take its edge
+// in by about a quarter cell, so for one-cell films they may move the surface by 0.2 cells from the
+// seeded one and leave holes under 5 % of rays; elsewhere by 0.1 cells and 1 %. (Measured in
+// tests/bench/FINDINGS.md: the narrowed stream in "Identification on the sample cup: what was
+// measured on the way to Table 1"; the particles' spacing and the film's holes in "Figures moved
+// from test comments".)
 TEST(LiquidLevelSet, SurfaceLiesAtTheLiquidBoundary) {
     enum Shape { kColumn, kSlab, kBall, kFilmEdge };
     struct Case { const char* name; Shape shape; double size; };  // radius, or a slab's thickness, in cells
