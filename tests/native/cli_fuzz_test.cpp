@@ -416,9 +416,19 @@ TEST_F(Fuzz, InputsThatOnceFailedStayRefusedInOneLine) {
     }
 }
 
-// Mutants of the other corpora that once failed: a mask cut short (OpenCV's decoder printed its own
-// two lines before ours), a checkpoint with a value of the wrong type (an internal error, exit 1).
-TEST_F(Fuzz, DamagedMasksAndCheckpointsThatOnceFailedStayRefusedInOneLine) {
+// Mutants of the other corpora that once failed: a clip whose container no longer says how many
+// frames it holds (its preview had no frame to show: exit 1), a mask cut short (OpenCV's decoder
+// printed its own two lines before ours), a checkpoint with a value of the wrong type (an internal
+// error, exit 1).
+TEST_F(Fuzz, DamagedFilesThatOnceFailedAreAcceptedOrRefusedInOneLine) {
+    if (std::system("ffmpeg -version > /dev/null 2>&1") == 0) {
+        ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v 12 -c:v mpeg4 " +
+                               (dir_ / "valid.mp4").string()).c_str()), 0);
+        const std::string clip = slurp(dir_ / "valid.mp4");
+        write("clip.mp4", clip.substr(0, 5) + std::string(64, '\0') + clip.substr(5));
+        EXPECT_EQ(probe("extract clip.mp4 --out clip_out --progress none", "clip.mp4 with 64 NULs at byte 5",
+                        "clip_out/preview.png"), "");
+    }
     writeSlumpCase(dir_);
     write("job.json", slumpJob(1).dump(1));
     ASSERT_EQ(probe(identifyInto("done"), "the valid job", "done/result.json"), "");
@@ -431,5 +441,5 @@ TEST_F(Fuzz, DamagedMasksAndCheckpointsThatOnceFailedStayRefusedInOneLine) {
     write("done/checkpoint.json", checkpoint.dump(1));
     write("job.json", slumpJob(2).dump(1));
     EXPECT_EQ(probe(identifyInto("done"), "checkpoint.json with /evaluated/2/seconds = true"), "");
-    EXPECT_EQ(outcomes_.at(2), 2) << "a damaged input was accepted";
+    EXPECT_EQ(outcomes_.at(2), 2) << "a damaged mask or checkpoint was accepted";
 }

@@ -204,10 +204,16 @@ private:
 // A few frames side by side with the mask tinted red, for a person to check the extraction.
 class PreviewStrip {
 public:
+    static constexpr size_t kTiles = 4;
+    // With no frames to show (a clip whose container does not say how many frames it holds), the
+    // first kTiles offered.
     explicit PreviewStrip(std::vector<int> framesToShow) : framesToShow_(std::move(framesToShow)) {}
 
     void offer(int frameIndex, const cv::Mat& frame, const cv::Mat1b& mask) {
-        if (std::find(framesToShow_.begin(), framesToShow_.end(), frameIndex) == framesToShow_.end()) return;
+        const bool shown = framesToShow_.empty() ? tiles_.size() < kTiles
+                                                 : std::find(framesToShow_.begin(), framesToShow_.end(),
+                                                             frameIndex) != framesToShow_.end();
+        if (!shown) return;
         cv::Mat tinted = frame.clone();
         tinted.setTo(cv::Scalar(0, 0, 255), mask);
         cv::addWeighted(frame, 0.5, tinted, 0.5, 0, tinted);
@@ -236,7 +242,7 @@ std::vector<int> plannedFrames(const ExtractionOptions& options, int frameCount)
 }
 
 std::vector<int> previewFrames(const std::vector<int>& planned) {
-    constexpr size_t kTiles = 4;
+    constexpr size_t kTiles = PreviewStrip::kTiles;
     if (planned.size() <= kTiles) return planned;
     std::vector<int> shown;
     for (size_t i = 0; i < kTiles; ++i) shown.push_back(planned[i * (planned.size() - 1) / (kTiles - 1)]);

@@ -184,7 +184,7 @@ constexpr double kBaseBytes = 110e6;
 constexpr double kBytesPerCell = 470;
 
 // A lower bound on the cost of a step on any machine: the per-step passes over every cell (fractions,
-// transfers, the solve's set-up) take at least this; this machine takes ~50 times more (FINDINGS).
+// transfers, the solve's set-up) take at least this (tests/bench/FINDINGS.md, "The least a step costs").
 constexpr double kLeastSecondsPerCellStep = 20e-9;
 constexpr double kMaxRunSeconds = 30 * 86400.0;
 
