@@ -244,6 +244,16 @@ protected:
     }
 
     static constexpr const char* kTrack = "time_s,front_m\n0,0.05\n0.5,0.07\n1.0,0.08\n";
+    static bool haveFfmpeg() { return std::system("ffmpeg -version > /dev/null 2>&1") == 0; }
+    // A 12-frame test-pattern clip as a phone would write it (MPEG-4 in MP4), made by ffmpeg.
+    std::string testClip() const {
+        const fs::path clip = dir_ / "valid.mp4";
+        const std::string command =
+            "ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v 12 -c:v mpeg4 " + clip.string();
+        EXPECT_EQ(std::system(command.c_str()), 0);
+        return slurp(clip);
+    }
+
     static std::string identifyInto(const std::string& out) {
         return "identify job.json --out " + out + " --progress none --no-plots --no-fields";
     }
@@ -287,10 +297,8 @@ TEST_F(Fuzz, MutatedTrackCsvsAreAcceptedOrRefusedInOneLine) {
 
 // A clip damaged as a failing card or an interrupted copy leaves it, through `extract`.
 TEST_F(Fuzz, MutatedClipsAreExtractedOrRefusedInOneLine) {
-    if (std::system("ffmpeg -version > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg not installed";
-    ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v 12 -c:v mpeg4 " +
-                           (dir_ / "valid.mp4").string()).c_str()), 0);
-    const std::string valid = slurp(dir_ / "valid.mp4");
+    if (!haveFfmpeg()) GTEST_SKIP() << "ffmpeg not installed";
+    const std::string valid = testClip();
     std::mt19937 random(5);
     fuzz(simulatingMutants(), [&] { return mutatedBytes(valid, random, {std::string(64, '\0')}, 1024); },
          [&](const Mutant& m) {
@@ -421,10 +429,8 @@ TEST_F(Fuzz, InputsThatOnceFailedStayRefusedInOneLine) {
 // printed its own two lines before ours), a checkpoint with a value of the wrong type (an internal
 // error, exit 1).
 TEST_F(Fuzz, DamagedFilesThatOnceFailedAreAcceptedOrRefusedInOneLine) {
-    if (std::system("ffmpeg -version > /dev/null 2>&1") == 0) {
-        ASSERT_EQ(std::system(("ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v 12 -c:v mpeg4 " +
-                               (dir_ / "valid.mp4").string()).c_str()), 0);
-        const std::string clip = slurp(dir_ / "valid.mp4");
+    if (haveFfmpeg()) {
+        const std::string clip = testClip();
         write("clip.mp4", clip.substr(0, 5) + std::string(64, '\0') + clip.substr(5));
         EXPECT_EQ(probe("extract clip.mp4 --out clip_out --progress none", "clip.mp4 with 64 NULs at byte 5",
                         "clip_out/preview.png"), "");
