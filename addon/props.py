@@ -162,7 +162,8 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     preview_made_with: StringProperty(default="")
     # Identify
     eta_initial: FloatProperty(name="Initial η (Pa·s)", description="Dynamic viscosity the search starts from, Pa·s",
-                               default=5.0, min=1e-6, precision=4)
+                               default=5.0, min=schema.search_bounds("viscosity")[0],
+                               max=schema.search_bounds("viscosity")[1], precision=4)
     eta_spread: FloatProperty(name="Spread (× η)", description="Initial CMA-ES spread, a factor of η (log space)",
                               default=3.0, min=1.01, max=1000.0)
     identify_resolution: IntProperty(name="Resolution", default=48, min=8, max=512,

@@ -84,6 +84,13 @@ def test_engine_reads_back_the_camera_and_the_job_the_addon_writes(ctx, tmp_work
     job, _note = identify.write_job(ctx, folder)
     out = _check(engine_path, os.path.join(folder, "blender_camera.json"), os.path.join(folder, "scene.json"), job)
     assert out.count(": ok (") == 3, out
+    # The search's start and spread at the ends of their panel ranges: the engine must take each job.
+    props = vs.bl_rna.properties
+    for initial in (props["eta_initial"].hard_min, props["eta_initial"].hard_max):
+        for spread in (props["eta_spread"].hard_min, props["eta_spread"].hard_max):
+            vs.eta_initial, vs.eta_spread = initial, spread
+            job, _note = identify.write_job(ctx, folder)
+            assert ": ok (" in _check(engine_path, job), (initial, spread)
 
 
 @pytest.mark.engine
