@@ -244,13 +244,10 @@ protected:
     }
 
     static constexpr const char* kTrack = "time_s,front_m\n0,0.05\n0.5,0.07\n1.0,0.08\n";
-    static bool haveFfmpeg() { return std::system("ffmpeg -version > /dev/null 2>&1") == 0; }
-    // A 12-frame test-pattern clip as a phone would write it (MPEG-4 in MP4), made by ffmpeg.
+    // A valid 12-frame clip's bytes.
     std::string testClip() const {
         const fs::path clip = dir_ / "valid.mp4";
-        const std::string command =
-            "ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v 12 -c:v mpeg4 " + clip.string();
-        EXPECT_EQ(std::system(command.c_str()), 0);
+        EXPECT_TRUE(viscoscope::cli_test::makeTestClip(clip, 12));
         return slurp(clip);
     }
 
@@ -297,7 +294,7 @@ TEST_F(Fuzz, MutatedTrackCsvsAreAcceptedOrRefusedInOneLine) {
 
 // A clip damaged as a failing card or an interrupted copy leaves it, through `extract`.
 TEST_F(Fuzz, MutatedClipsAreExtractedOrRefusedInOneLine) {
-    if (!haveFfmpeg()) GTEST_SKIP() << "ffmpeg not installed";
+    if (!viscoscope::cli_test::haveFfmpeg()) GTEST_SKIP() << "ffmpeg not installed";
     const std::string valid = testClip();
     std::mt19937 random(5);
     fuzz(simulatingMutants(), [&] { return mutatedBytes(valid, random, {std::string(64, '\0')}, 1024); },
@@ -429,7 +426,7 @@ TEST_F(Fuzz, InputsThatOnceFailedStayRefusedInOneLine) {
 // printed its own two lines before ours), a checkpoint with a value of the wrong type (an internal
 // error, exit 1).
 TEST_F(Fuzz, DamagedFilesThatOnceFailedAreAcceptedOrRefusedInOneLine) {
-    if (haveFfmpeg()) {
+    if (viscoscope::cli_test::haveFfmpeg()) {
         const std::string clip = testClip();
         write("clip.mp4", clip.substr(0, 5) + std::string(64, '\0') + clip.substr(5));
         EXPECT_EQ(probe("extract clip.mp4 --out clip_out --progress none", "clip.mp4 with 64 NULs at byte 5",

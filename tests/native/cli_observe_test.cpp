@@ -32,17 +32,14 @@ protected:
         dir_ = fs::temp_directory_path() / ("viscoscope_cli_observe_" + test + "_" + std::to_string(getpid()));
         fs::remove_all(dir_);
         fs::create_directories(dir_);
-        if (std::system("ffmpeg -version > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg not installed";
+        if (!viscoscope::cli_test::haveFfmpeg()) GTEST_SKIP() << "ffmpeg not installed";
     }
 
     CommandResult run(const std::string& arguments) const { return runViscoscope(arguments, dir_); }
 
-    // A short test-pattern clip made by the ffmpeg tool (this test links no OpenCV).
     fs::path makeVideo(const std::string& name, int frames) const {
         const fs::path video = dir_ / name;
-        const std::string command = "ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v " +
-                                    std::to_string(frames) + " -c:v mpeg4 " + video.string();
-        EXPECT_EQ(std::system(command.c_str()), 0);
+        EXPECT_TRUE(viscoscope::cli_test::makeTestClip(video, frames));
         return video;
     }
 

@@ -40,6 +40,16 @@ inline CommandResult runViscoscope(const std::string& arguments, const std::file
     return runCommand(std::string(VISCOSCOPE_CLI) + " " + arguments, dir);
 }
 
+inline bool haveFfmpeg() { return std::system("ffmpeg -version > /dev/null 2>&1") == 0; }
+
+// A short 96×72 test-pattern clip at 10 fps, MPEG-4 as a phone writes it, made by the ffmpeg tool
+// (the cli tests link no OpenCV); false when ffmpeg failed.
+inline bool makeTestClip(const std::filesystem::path& clip, int frames) {
+    const std::string command = "ffmpeg -v error -y -f lavfi -i testsrc=size=96x72:rate=10 -frames:v " +
+                                std::to_string(frames) + " -c:v mpeg4 " + clip.string();
+    return std::system(command.c_str()) == 0;
+}
+
 // The smallest identification there is, for the tests of `identify`'s input and output: a liquid
 // block slumping on the ground at 16³ (coarse 11³), two hand-drawn reference masks (these tests
 // link no OpenCV), λ = 4.
