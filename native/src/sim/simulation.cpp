@@ -836,38 +836,22 @@ void Simulation::applySurfaceTension(double dt) {
     }
 }
 
-// Per-sample viscosity: the material law at the local shear rate of `velocity` (constant when
-// Newtonian).
+// Per-sample viscosity: the material law at each stress sample's own shear rate (constant when
+// Newtonian); samples without liquid keep the scene's viscosity, which no stress row reads.
 void Simulation::updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity) {
     const double eta0 = scene_.material.viscosity;
-    const Lattice& cells = cellViscosity_.lattice;
-    if (material_->shearDependent()) {
-        const Field rate = cellShearRates(problem, velocity);
-        for (int c = 0; c < cells.count(); ++c)
-            cellViscosity_[c] = fractions_.cell[c] < kMinWeight ? eta0 : material_->viscosity(rate[c]);
+    if (!material_->shearDependent()) {
+        std::fill(cellViscosity_.values.begin(), cellViscosity_.values.end(), eta0);
+        for (Field& eta : edgeViscosity_) std::fill(eta.values.begin(), eta.values.end(), eta0);
+        return;
     }
-    for (int e = 0; e < 3; ++e) {
-        Field& eta = edgeViscosity_[e];
-        if (!material_->shearDependent()) {
-            std::fill(eta.values.begin(), eta.values.end(), eta0);
-            continue;
-        }
-        const int a = (e + 1) % 3, b = (e + 2) % 3;
-        for (int s = 0; s < eta.lattice.count(); ++s) {  // mean of the four cells around the edge
-            const Vec3i ijk = eta.lattice.coords(s);
-            double sum = 0;
-            int count = 0;
-            for (int da = -1; da <= 0; ++da)
-                for (int db = -1; db <= 0; ++db) {
-                    Vec3i c = ijk + da * Vec3i::Unit(a) + db * Vec3i::Unit(b);
-                    if (cells.resolve(c)) {
-                        sum += cellViscosity_[cells.index(c[0], c[1], c[2])];
-                        ++count;
-                    }
-                }
-            eta[s] = count ? sum / count : eta0;
-        }
-    }
+    const ShearRates rates = shearRates(problem, velocity);
+    auto apply = [&](Field& eta, const Field& weight, const Field& rate) {
+        for (int s = 0; s < eta.lattice.count(); ++s)
+            eta[s] = weight[s] < kMinWeight ? eta0 : material_->viscosity(rate[s]);
+    };
+    apply(cellViscosity_, fractions_.cell, rates.cell);
+    for (int e = 0; e < 3; ++e) apply(edgeViscosity_[e], fractions_.edge[e], rates.edge[e]);
 }
 
 // APIC grid → particle transfer: velocity and the affine matrix from the weight gradients.

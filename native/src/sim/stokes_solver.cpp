@@ -373,7 +373,7 @@ void accumulate(SolveStats& stats, const CgResult& cg, size_t unknowns) {
 
 }  // namespace
 
-Field cellShearRates(const StokesProblem& p, const std::array<Field, 3>& velocity) {
+ShearRates shearRates(const StokesProblem& p, const std::array<Field, 3>& velocity) {
     const Grid& g = *p.grid;
     const VolumeFractions& w = *p.weights;
     const Lattice cells = g.lattice(kCellCentre);
@@ -396,12 +396,15 @@ Field cellShearRates(const StokesProblem& p, const std::array<Field, 3>& velocit
             hasShear[row.component][row.sample] = 1;
         }
     }
-    Field rate(cells);
+    // At the cells: Σ D_aa² and each D_ab² from the mean over the cell's four edges.
+    ShearRates rates{Field(cells), {}};
+    Field normalSquares(cells);
+    std::array<Field, 3> cellShearSquares{Field(cells), Field(cells), Field(cells)};
     for (int c = 0; c < cells.count(); ++c) {
         if (w.cell[c] < kMinWeight) continue;
         const Vec3i ijk = cells.coords(c);
-        double dd = 0;  // D:D
-        for (int a = 0; a < 3; ++a) dd += normal[a][c] * normal[a][c];
+        for (int a = 0; a < 3; ++a) normalSquares[c] += normal[a][c] * normal[a][c];
+        double dd = normalSquares[c];  // D:D
         for (int e = 0; e < 3; ++e) {
             const int a = (e + 1) % 3, b = (e + 2) % 3;
             double sum = 0;
@@ -415,11 +418,35 @@ Field cellShearRates(const StokesProblem& p, const std::array<Field, 3>& velocit
                     sum += shear[e][idx];
                     ++count;
                 }
-            if (count) dd += 2 * std::pow(sum / count, 2);
+            if (count) cellShearSquares[e][c] = std::pow(sum / count, 2);
+            dd += 2 * cellShearSquares[e][c];
         }
-        rate[c] = std::sqrt(2 * dd);
+        rates.cell[c] = std::sqrt(2 * dd);
     }
-    return rate;
+    // At the edges: the edge's own D_ab², the rest from the mean over the liquid cells around it.
+    for (int e = 0; e < 3; ++e) {
+        const Lattice& edges = shear[e].lattice;
+        rates.edge[e] = Field(edges);
+        const int a = (e + 1) % 3, b = (e + 2) % 3;
+        for (int s = 0; s < edges.count(); ++s) {
+            if (!hasShear[e][s]) continue;
+            const Vec3i ijk = edges.coords(s);
+            double others = 0;
+            int count = 0;
+            for (int da = -1; da <= 0; ++da)
+                for (int db = -1; db <= 0; ++db) {
+                    Vec3i c = ijk + da * Vec3i::Unit(a) + db * Vec3i::Unit(b);
+                    if (!cells.resolve(c)) continue;
+                    const int idx = cells.index(c[0], c[1], c[2]);
+                    if (w.cell[idx] < kMinWeight) continue;
+                    others += normalSquares[idx] + 2 * (cellShearSquares[a][idx] + cellShearSquares[b][idx]);
+                    ++count;
+                }
+            const double dd = 2 * shear[e][s] * shear[e][s] + (count ? others / count : 0);
+            rates.edge[e][s] = std::sqrt(2 * dd);
+        }
+    }
+    return rates;
 }
 
 SolveStats StokesSolver::solve(const StokesProblem& problem, StokesState& state) {

@@ -86,11 +86,19 @@ public:
 
 std::unique_ptr<PressureViscositySolver> makeSolver(bool unified);
 
-// The shear rate √(2 D:D) at cell centres, from the same velocity differences the stress rows use
-// (wall ghost values included), so that a material law sees the strain the solver discretizes:
-// D_aa from the cell's own difference, D_ab as the mean over the four edges around the cell.
-// Cells without liquid get 0.
-Field cellShearRates(const StokesProblem& problem, const std::array<Field, 3>& velocity);
+// The shear rate √(2 D:D) at the stress samples, from the same velocity differences the stress rows
+// use (wall ghost values included), so that a material law sees the strain the solver discretizes.
+// At a cell centre D_aa comes from the cell's own difference and D_ab as the mean over the four
+// edges around it; at an edge its own D_ab from the edge's difference and the other components as
+// the mean over the cells around it. Each sample keeps the component it resolves: a yielded layer
+// thinner than a cell (a yield-stress liquid near arrest, against its bed) shears at the bed's edges
+// and hardly at the cell centres above, and averaged into the cells its rate was halved.
+// Samples without liquid (no stress row) get 0.
+struct ShearRates {
+    Field cell;
+    std::array<Field, 3> edge;
+};
+ShearRates shearRates(const StokesProblem& problem, const std::array<Field, 3>& velocity);
 
 // The ghost value of a velocity sample inside a wall, as a multiple of the liquid sample beside it:
 // the linear profile through the Navier slip condition u = λ ∂u/∂n at the wall (λ = 0: no-slip),
