@@ -405,6 +405,37 @@ TEST(Physics, PowerLawFilmMatchesItsProfile) {
     EXPECT_LT(error, 0.05);
 }
 
+// Carreau η = η∞ + (η0 − η∞)(1 + (λγ̇)²)^{(n−1)/2} (Carreau 1972): η0 = 5 Pa·s thins from η0 at the top
+// (γ̇ → 0) to a quarter of it at the bed (λγ̇ ≈ 10 there). The stress profile is the power law's,
+// ρ g sinθ (h − z); γ̇ at each height solves η(γ̇) γ̇ = τ (monotone in γ̇), found by bisection, and
+// u(z) is its integral from the bed (Simpson, 400 intervals).
+TEST(Physics, CarreauFilmMatchesItsProfile) {
+    const double eta0 = 5.0, etaInfinity = 0.01, lambda = 0.75, n = 0.4, h = kFilmDepth;
+    const json material = {{"density", 1000},
+                           {"viscosity", eta0},
+                           {"model", {{"type", "carreau"}, {"eta_infinity", etaInfinity}, {"relaxation_time", lambda},
+                                      {"flow_index", n}}}};
+    auto stress = [&](double rate) {
+        return rate * (etaInfinity + (eta0 - etaInfinity) * std::pow(1 + lambda * lambda * rate * rate, 0.5 * (n - 1)));
+    };
+    auto rateAt = [&](double z) {
+        const double tau = kFilmDrive * (h - z);
+        double lo = 0, hi = tau / etaInfinity;  // η ≥ η∞ bounds the rate
+        for (int i = 0; i < 200; ++i) (stress(0.5 * (lo + hi)) < tau ? lo : hi) = 0.5 * (lo + hi);
+        return 0.5 * (lo + hi);
+    };
+    auto exact = [&](double z) {
+        const int intervals = 400;
+        const double step = z / intervals;
+        double sum = rateAt(0) + rateAt(z);
+        for (int i = 1; i < intervals; ++i) sum += (i % 2 ? 4 : 2) * rateAt(i * step);
+        return sum * step / 3;
+    };
+    std::printf("Carreau film: λγ̇ at the bed %.1f, η there %.2f η0\n", lambda * rateAt(0),
+                kFilmDrive * h / rateAt(0) / eta0);
+    EXPECT_LT(filmProfileError(material, 16, exact, "Carreau n=0.4"), 0.05);
+}
+
 // Navier slip of length b on the bed: the Nusselt profile plus a slip velocity b·(du/dz)_bed =
 // b ρ g sinθ h / η. b = h/5 makes the slip 40 % of the no-slip surface speed.
 TEST(Physics, NavierSlipFilmMatchesItsProfile) {
