@@ -82,7 +82,7 @@ const char* const kResumeFile = "resume.state";
 class RunDoubts {
 public:
     RunDoubts(const nlohmann::json& framesSoFar, double initialVolume, const ProgressReporter& progress)
-        : largestVolume_(initialVolume) {
+        : loss_(initialVolume) {
         for (const nlohmann::json& frame : framesSoFar)
             observe(frame.at("frame").get<int>(), frame.at("converged").get<bool>(), frame.at("volume").get<double>(),
                     progress);
@@ -92,14 +92,13 @@ public:
             add("frame " + std::to_string(frame) + ": the pressure–viscosity solve stopped at "
                 "solver.max_iterations short of solver.tolerance; the flow is not the model's (raise "
                 "max_iterations, or check η, σ and the time step)", progress);
-        const double lost = 1 - liquidVolume / largestVolume_;
+        const double lost = loss_.observe(liquidVolume);
         if (lost > sim::kLostLiquidShare && !lostReported_) {
             lostReported_ = true;
             add("frame " + std::to_string(frame) + ": the liquid has lost " + std::to_string(int(100 * lost)) +
                 " % of its volume (it left the domain or went into a solid); the result describes another amount of "
                 "liquid", progress);
         }
-        largestVolume_ = std::max(largestVolume_, liquidVolume);
     }
     // With the count of frames whose solve did not converge.
     nlohmann::json warnings() const {
@@ -113,7 +112,7 @@ private:
         progress.warn(warning);
         warnings_.push_back(warning);
     }
-    double largestVolume_;
+    sim::LiquidLoss loss_;
     bool lostReported_ = false;
     int unconvergedFrames_ = 0;
     nlohmann::json warnings_ = nlohmann::json::array();

@@ -317,14 +317,13 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     if (silhouettes && std::any_of(job.parameters.begin(), job.parameters.end(),
                                    [](const ParameterSpec& p) { return p.parameter.solid >= 0; }))
         searchedView = sceneVisibility(scene, job.camera);
-    double largestVolume = simulation.liquidVolume();
+    sim::LiquidLoss loss(simulation.liquidVolume());
     for (int frame = 0; frame <= lastFrame; ++frame) {
         const auto simStart = Clock::now();
         if (frame > 0) {
             const sim::FrameStats stats = simulation.advanceFrame();
             ev.unconvergedFrames += stats.converged ? 0 : 1;
-            ev.liquidLost = std::max(ev.liquidLost, 1 - stats.liquidVolume / largestVolume);
-            largestVolume = std::max(largestVolume, stats.liquidVolume);
+            ev.liquidLost = std::max(ev.liquidLost, loss.observe(stats.liquidVolume));
         }
         auto lap = Clock::now();
         ev.simulationSeconds += seconds(simStart, lap);

@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 #include <openvdb/openvdb.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <functional>
 #include <iosfwd>
@@ -61,6 +62,21 @@ public:
 // A share of the liquid lost (out of the domain, or into a solid) that makes a run's result
 // probably wrong: a run conserves its volume to a few percent (the sample cup's drift is -0.3 %).
 inline constexpr double kLostLiquidShare = 0.2;
+
+// The share of a run's liquid lost since its fullest frame so far, fed one frame at a time.
+class LiquidLoss {
+public:
+    explicit LiquidLoss(double initialVolume) : largestVolume_(initialVolume) {}
+    // This frame's loss.
+    double observe(double liquidVolume) {
+        const double lost = 1 - liquidVolume / largestVolume_;
+        largestVolume_ = std::max(largestVolume_, liquidVolume);
+        return lost;
+    }
+
+private:
+    double largestVolume_;
+};
 
 struct FrameStats {
     int frame = 0;
