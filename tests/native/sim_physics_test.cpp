@@ -878,9 +878,9 @@ TEST(Physics, PowerLawGravityCurrentSpreadsAtItsSimilarityExponent) {
 // stress τ_y, which moves its second moment's radius at (21/8) π τ_y² R∞³ / (9 η_max ρ g V) = 4 μm/s,
 // 0.07 % of R∞ over the run. The slump counts as arrested when that radius grows less than 0.1 % of
 // R∞ over a second (15× that creep); it must arrest within 10 s, and its creep is printed.
-// At CI size the slump arrests 7 % short of R∞, the same at 64 cells, and the shortfall shrinks
-// with τ_y (so with H∞/R∞) as the thin limit's own first-order error would (tests/bench/FINDINGS.md,
-// "Yield stress sampled where it acts").
+// The slump stops 7 % short of R∞ at 48, 64 and 96 cells alike, so the full-size claim fails; the
+// shortfall shrinks with τ_y (so with H∞/R∞) as the thin limit's own first-order error would
+// (tests/bench/FINDINGS.md, "Yield stress sampled where it acts").
 TEST(Physics, YieldStressSlumpArrestsAtItsRadius) {
     const bool full = fullVerification();
     const double rho = 1000, g = 9.81, tauY = 12, K = 4, etaMax = 1e4, volume = 7.2e-5, tCap = 10;
