@@ -409,25 +409,30 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
+// The reference run of `scene` (its resolution and seed) sampled 60 times a second for a third of a
+// second into a CSV, as a lab would measure it: the front along x from `gate`, and the reach from the
+// vertical through `wall`.
+void writeMeasuredTrack(json scene, const Eigen::Vector3d& gate, const Eigen::Vector3d& wall, const fs::path& file) {
+    scene["fps"] = 60;
+    sim::Simulation reference(parseScene(scene, "reference scene"));
+    const GroundObservables ground{0.0, 0.005};
+    std::ofstream csv(file);
+    csv << "time_s,front_m,radius_m\n";
+    for (int frame = 0; frame <= 20; ++frame) {
+        if (frame > 0) reference.advanceFrame();
+        const auto& particles = reference.particles().position;
+        csv << frame / 60.0 << "," << frontAlongGround(particles, gate, Eigen::Vector3d::UnitX(), ground) << ","
+            << puddleDiameter(particles, wall, ground) / 2 << "\n";
+    }
+}
+
 // A measured track alone, like a lab's front positions, with no camera and no silhouettes: the
 // column's front along the ground, and its reach from the vertical through the middle of the wall it
 // leans on (the "radius" observable), sampled 60 times a second from the reference simulation (24
 // cells, seed 11) and written as a CSV, each identify η on the job's 20-cell grid with seed 3.
 TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
-    json referenceScene = sceneJson(kEtaTrue, 24, 11, 20);
-    referenceScene["fps"] = 60;
-    sim::Simulation reference(parseScene(referenceScene, "reference scene"));
-    const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0), along = Eigen::Vector3d::UnitX();
-    const GroundObservables ground{0.0, 0.005};
-    std::ofstream csv(dir_ / "measured.csv");
-    csv << "time_s,front_m,radius_m\n";
-    for (int frame = 0; frame <= 20; ++frame) {
-        if (frame > 0) reference.advanceFrame();
-        const auto& particles = reference.particles().position;
-        csv << frame / 60.0 << "," << frontAlongGround(particles, gate, along, ground) << ","
-            << puddleDiameter(particles, wall, ground) / 2 << "\n";
-    }
-    csv.close();
+    const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0);
+    writeMeasuredTrack(sceneJson(kEtaTrue, 24, 11, 20), gate, wall, dir_ / "measured.csv");
     for (const char* observable : {"front", "radius"}) {
         const Eigen::Vector3d& origin = std::string(observable) == "front" ? gate : wall;
         json doc = jobJson();
@@ -452,6 +457,98 @@ TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
         EXPECT_LT(trackError, 0.05) << observable;
         fs::remove_all(dir_ / "track_out");
     }
+}
+
+// Several runs of one liquid: the column above and a squatter one of the same volume (5 cm wide,
+// 3.15 cm high), each with its measured front from its own reference run (24 cells, seed 11), in
+// one job whose E is the sum of the runs' E, each scored as a job of its own would score it.
+TEST_F(IdentifyLoop, SeveralRunsOfOneLiquidShareItsParameters) {
+    const std::array<double, 2> widths{0.035, 0.05};
+    json runs = json::array();
+    for (size_t r = 0; r < widths.size(); ++r) {
+        const double height = 0.035 * 0.045 / widths[r];
+        json scene = sceneJson(kEtaTrue, 24, 11, 20);
+        scene["liquids"][0]["max"] = {widths[r], 0.04, height};
+        const std::string csv = "run" + std::to_string(r) + ".csv";
+        writeMeasuredTrack(scene, {widths[r], 0.02, 0}, {0, 0.02, 0}, dir_ / csv);
+        scene = sceneJson(8.0, 16, 3, 10);
+        scene["liquids"][0]["max"] = {widths[r], 0.04, height};
+        runs.push_back({{"scene", scene},
+                        {"track", {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
+                                   {"origin", {widths[r], 0.02, 0}}, {"direction", {1, 0, 0}}}}});
+    }
+    json doc = jobJson();
+    for (const char* key : {"scene", "camera", "silhouettes"}) doc.erase(key);
+    auto single = [&, shared = doc](size_t r) {
+        json one = shared;
+        for (const auto& [key, value] : runs[r].items()) one[key] = value;
+        return one;
+    };
+    doc["runs"] = runs;
+
+    // E is the sum of what each run alone scores, on any grid.
+    const identify::Job both = job(doc);
+    ASSERT_EQ(both.otherRuns.size(), 1u);
+    const identify::Evaluation together = identify::evaluate(both, identify::loadObservation(both), {5.0}, 20);
+    std::vector<double> alone;
+    for (size_t r = 0; r < runs.size(); ++r) {
+        const identify::Job one = job(single(r));
+        alone.push_back(identify::evaluate(one, identify::loadObservation(one), {5.0}, 20).E);
+    }
+    ASSERT_EQ(together.runE.size(), 2u);
+    EXPECT_DOUBLE_EQ(together.runE[0], alone[0]);
+    EXPECT_DOUBLE_EQ(together.runE[1], alone[1]);
+    EXPECT_DOUBLE_EQ(together.E, alone[0] + alone[1]);
+
+    // Identified from both runs, and from each alone (printed, for the figures).
+    identify::IdentifyOptions options;
+    options.writeFields = false;
+    const std::array<std::pair<const char*, json>, 3> jobs{{{"both runs", doc}, {"the tall column", single(0)},
+                                                            {"the squat column", single(1)}}};
+    for (const auto& [label, jobDoc] : jobs) {
+        const auto started = std::chrono::steady_clock::now();
+        const identify::IdentificationResult result = identify::identify(job(jobDoc), dir_ / "runs_out", options);
+        const double error = std::abs(result.theta[0] - kEtaTrue) / kEtaTrue;
+        std::printf("[ identify ] from %s: eta = %.4f Pa·s (truth %.1f, error %.1f %%), interval [%.3f, %.3f], "
+                    "%ld evaluations, %.0f s\n", label, result.theta[0], kEtaTrue, 100 * error, result.interval[0][0],
+                    result.interval[0][1], result.evaluations,
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+        if (std::string(label) == "both runs") EXPECT_LT(error, 0.10);
+        fs::remove_all(dir_ / "runs_out");
+    }
+}
+
+// Runs of one job share one liquid, and each run's keys stay within its entry.
+TEST_F(IdentifyLoop, RunsThatDisagreeOnTheMaterialAreRefused) {
+    json doc = jobJson();
+    for (const char* key : {"scene", "camera", "silhouettes"}) doc.erase(key);
+    json other = sceneJson(8.0, 16, 3, 10);
+    other["material"]["density"] = 1000;
+    doc["runs"] = {{{"scene", "scene.json"}, {"camera", "camera.json"}, {"silhouettes", "reference"}},
+                   {{"scene", other}, {"camera", "camera.json"}, {"silhouettes", "reference"}}};
+    auto refusal = [&](const json& d) {
+        try {
+            job(d);
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    EXPECT_NE(refusal(doc).find("runs[1].scene: material.density: 1000.0 where runs[0] has 1400.0"), std::string::npos)
+        << refusal(doc);
+    other["material"]["density"] = 1400;
+    other["material"]["viscosity"] = 2.0;  // searched: the runs' own values do not matter
+    doc["runs"][1]["scene"] = other;
+    EXPECT_EQ(refusal(doc), "accepted");
+    json beside = doc;
+    beside["camera"] = "camera.json";
+    EXPECT_NE(refusal(beside).find("camera: belongs in each entry of runs"), std::string::npos) << refusal(beside);
+    json unknown = doc;
+    unknown["runs"][1]["resolution"] = 12;
+    EXPECT_NE(refusal(unknown).find("runs[1].resolution"), std::string::npos) << refusal(unknown);
+    json empty = doc;
+    empty["runs"] = json::array();
+    EXPECT_NE(refusal(empty).find("runs: must be a non-empty array"), std::string::npos) << refusal(empty);
 }
 
 // The budget's prediction of a full-fidelity evaluation comes from the coarse evaluations near the

@@ -125,6 +125,8 @@ nlohmann::json referenceSource(const Job& job) {
 }
 
 void prepareReference(Job& job, const fs::path& outDir) {
+    for (size_t k = 0; k < job.otherRuns.size(); ++k)
+        prepareReference(job.otherRuns[k], outDir / ("run" + std::to_string(k + 1)));
     if (!job.referenceDir.empty() || !job.video) return;
     const fs::path dir = outDir / "reference", sourceFile = dir / "source.json";
     // Silhouettes extracted from another video, plate or settings are extracted again, not reused.
@@ -210,6 +212,7 @@ Observation loadObservation(const Job& job) {
         obs.track = area;
         obs.trackWeight = job.areaTrackWeight;
     }
+    for (const Job& run : job.otherRuns) obs.otherRuns.push_back(loadObservation(run));
     return obs;
 }
 
@@ -263,6 +266,7 @@ Observation firstPartOf(const Observation& observation, double share) {
     const auto measures = [](double m) { return std::isfinite(m) && m != 0; };
     if (hasSilhouettes(part) && std::none_of(part.measured.begin(), part.measured.end(), measures))
         part.measured.clear();
+    for (Observation& run : part.otherRuns) run = firstPartOf(run, share);
     return part;
 }
 
@@ -423,6 +427,22 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
     ev.simulatedPixels /= n;
     if (ev.trackError) *ev.trackError /= std::sqrt(double(n));  // the RMS over the placements
     for (double& e : ev.frameE) e /= n;
+    if (!job.otherRuns.empty()) ev.runE = {ev.E};
+    for (size_t k = 0; k < job.otherRuns.size(); ++k) {
+        const Evaluation run = evaluate(job.otherRuns[k], obs.otherRuns.at(k), theta, resolution, {}, gridShift);
+        ev.runE.push_back(run.E);
+        ev.E += run.E;
+        ev.simulatedPixels += run.simulatedPixels;
+        ev.liquidLost = std::max(ev.liquidLost, run.liquidLost);
+        ev.unconvergedFrames += run.unconvergedFrames;
+        ev.seconds += run.seconds;
+        ev.simulationSeconds += run.simulationSeconds;
+        ev.silhouetteSeconds += run.silhouetteSeconds;
+        ev.fieldsSeconds += run.fieldsSeconds;
+        // Per simulated frame over the runs, for the time budget's prediction of a longer clip.
+        if (run.frameSeconds.size() > ev.frameSeconds.size()) ev.frameSeconds.resize(run.frameSeconds.size(), 0.0);
+        for (size_t i = 0; i < run.frameSeconds.size(); ++i) ev.frameSeconds[i] += run.frameSeconds[i];
+    }
     return ev;
 }
 

@@ -29,6 +29,7 @@ json toJson(const Evaluation& e) {
              {"fields_s", e.fieldsSeconds},
              {"frame_s", e.frameSeconds}};
     if (e.trackError) doc["track_error"] = *e.trackError;
+    if (!e.runE.empty()) doc["run_E"] = e.runE;
     if (e.fields)
         doc["fields"] = {{"frames", e.fields->frames},
                          {"mean_ground_speed", e.fields->meanGroundSpeed},
@@ -51,6 +52,7 @@ Evaluation evaluationFromJson(const json& doc) {
     e.fieldsSeconds = doc.at("fields_s").get<double>();
     e.frameSeconds = doc.at("frame_s").get<std::vector<double>>();
     if (doc.contains("track_error")) e.trackError = doc.at("track_error").get<double>();
+    if (doc.contains("run_E")) e.runE = doc.at("run_E").get<std::vector<double>>();
     if (doc.contains("fields")) {
         const json& f = doc.at("fields");
         e.fields = FieldsSummary{f.at("frames").get<int>(), f.at("mean_ground_speed").get<double>(),

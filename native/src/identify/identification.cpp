@@ -103,6 +103,7 @@ std::string fingerprint(const Job& job) {
     doc["_silhouette_method"] = job.exactSilhouettes ? "exact" : "fast";
     doc["_grid_placements"] = job.gridPlacements;
     doc["_grid_placement_schedule"] = placementScheduleName(job.placementSchedule);
+    for (const Job& run : job.otherRuns) doc["_runs"].push_back(fingerprint(run));
     return Digest().add(doc.dump()).hex();
 }
 
@@ -627,8 +628,10 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             if (stop == StopReason::TimeBudget) stop.reset();  // decided again below, with this job's budget
         }
         resumedFrom = es.generation();
-    } else if (job.hasSilhouettes()) {
-        requireCameraSeesLiquid(job, coarseEnd > 0 ? coarseRes : fineRes);
+    } else {
+        if (job.hasSilhouettes()) requireCameraSeesLiquid(job, coarseEnd > 0 ? coarseRes : fineRes);
+        for (const Job& run : job.otherRuns)
+            if (run.hasSilhouettes()) requireCameraSeesLiquid(run, coarseEnd > 0 ? coarseRes : fineRes);
     }
 
     std::optional<ThreadPool> ownPool;

@@ -234,7 +234,16 @@ struct Job {
     PlacementSchedule placementSchedule = PlacementSchedule::ByGeneration;
     FidelitySchedule fidelity;
     nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
+    // A job with "runs" (several runs of one liquid, each its own scene and reference, sharing the
+    // material's parameters) is its first run, with the others here: each a Job of its own scene,
+    // camera and reference, and this job's parameters and search settings. E is the sum of the
+    // runs' E. Every searched and fixed parameter must exist in every run's scene, and the scenes
+    // must hold the same material (parseJob refuses them otherwise).
+    std::vector<Job> otherRuns;
 };
+// The keys of a job file that belong to one run: with "runs" they are given in each of its entries
+// and not at the top level.
+const std::vector<std::string>& runKeys();
 
 // Parses and validates everything needed before the first simulation; throws InputError naming
 // the file and the field. Relative paths resolve against the job file's folder.
@@ -260,10 +269,11 @@ struct Observation {
     // Per reference frame, the job's measured track there (NaN where it is not compared). Without
     // silhouettes the reference frames are the simulation frames within the track's time span.
     std::vector<double> measured;
+    std::vector<Observation> otherRuns;  // of Job::otherRuns, in order
 };
 
 // When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
-// job.extraction and points job.referenceDir there. A finished extraction is reused while
+// job.extraction and points job.referenceDir there (a further run k's into OUT/run<k>/reference). A finished extraction is reused while
 // referenceSource(job), kept beside it as source.json, is unchanged.
 void prepareReference(Job& job, const std::filesystem::path& outDir);
 // What a video reference is extracted from: the video, clean plate and exclusion mask files (size,
@@ -272,7 +282,7 @@ void prepareReference(Job& job, const std::filesystem::path& outDir);
 nlohmann::json referenceSource(const Job& job);
 
 // Loads the reference (checking image size against the camera and that frames remain) and maps
-// reference times onto simulation frames.
+// reference times onto simulation frames; each further run's as well.
 Observation loadObservation(const Job& job);
 // The simulation frames of the reference frames that show liquid: a silhouette covering at least
 // kInformativePixelShare of the compared pixels (extraction noise stays below it), or without
@@ -284,7 +294,7 @@ std::vector<int> informativeSimFrames(const Observation& observation);
 constexpr int kMinInformativeFrames = 3;
 // The same observation limited to the reference frames within the first `share` of the simulated
 // clip, extended to its kMinInformativeFrames-th informative frame (the whole clip when it has
-// fewer). The first compared frame always stays.
+// fewer). The first compared frame always stays. Each further run's is cut alike.
 Observation firstPartOf(const Observation& observation, double share);
 // The last simulation frame any reference frame is compared with.
 int lastSimFrame(const Observation& observation);
@@ -306,8 +316,12 @@ struct Evaluation {
     // fullest frame, and the frames whose solve stopped short of its tolerance (over placements).
     double liquidLost = 0;
     int unconvergedFrames = 0;
-    // The measured track's relative error, sqrt(Σ(sim − measured)² / Σ measured²), when one is compared.
+    // The measured track's relative error, sqrt(Σ(sim − measured)² / Σ measured²), when one is compared
+    // (of the first run).
     std::optional<double> trackError;
+    // With several runs, each run's E (their sum is E); frameE, the track error and the fields are
+    // the first run's.
+    std::vector<double> runE;
     double seconds = 0;
     // Where the time went; fieldsSeconds is the .vdb writes and the level sets only they need.
     double simulationSeconds = 0, silhouetteSeconds = 0, fieldsSeconds = 0;
@@ -323,7 +337,7 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 // ByGeneration schedule on the grid moved by `gridShift` alone. With a `fieldsDir`,
 // the first placement also writes every frame 0..lastSimFrame there as frame_%05d.vdb (surface,
 // velocity, pressure) for Blender, so that the best evaluation's own run can be kept instead of
-// simulated again.
+// simulated again. A job's further runs are scored alike (without fields) and added to E.
 Evaluation evaluate(const Job& job, const Observation& observation, const std::vector<double>& theta,
                     int resolution, const std::filesystem::path& fieldsDir = {}, double gridShift = 0);
 // An evaluation as JSON: the core of its checkpoint record, and what it travels between MPI ranks as.

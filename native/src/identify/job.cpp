@@ -3,6 +3,7 @@
 // so a bad job fails before any simulation.
 #include "identify/identify.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -164,7 +165,63 @@ FixedParameter parseFixed(const nlohmann::json& p, const Scene& scene, const std
     return fixed;
 }
 
+// The first field in which run `r`'s material differs from the first run's, once every searched
+// parameter holds the first run's value in both (what is searched is the same liquid's by design).
+void requireOneMaterial(const std::vector<Job>& runs, const std::string& origin) {
+    const Job& first = runs.front();
+    const nlohmann::json material = sceneToJson(first.scene).at("material");
+    for (size_t r = 1; r < runs.size(); ++r) {
+        Scene scene = runs[r].scene;
+        for (size_t i = 0; i < first.parameters.size(); ++i)
+            setParameter(scene, runs[r].parameters[i].parameter, parameterValue(first.scene, first.parameters[i].parameter));
+        const nlohmann::json other = sceneToJson(scene).at("material");
+        const nlohmann::json patch = nlohmann::json::diff(material, other);
+        if (patch.empty()) continue;
+        const std::string path = patch.front().at("path").get<std::string>();
+        std::string field = "material" + path;
+        std::replace(field.begin(), field.end(), '/', '.');
+        const nlohmann::json::json_pointer pointer(path);
+        throw InputError(origin + ": runs[" + std::to_string(r) + "].scene: " + field + ": " +
+                         (other.contains(pointer) ? other.at(pointer).dump() : std::string("absent")) + " where runs[0] has " +
+                         (material.contains(pointer) ? material.at(pointer).dump() : std::string("none")) +
+                         "; the runs of one job share one liquid");
+    }
+}
+
+// {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
+// keys and its entry's, so that every check a single-run job gets applies to each run alike.
+Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
+    const nlohmann::json& runs = doc.at("runs");
+    if (!runs.is_array() || runs.empty()) throw InputError(origin + ": runs: must be a non-empty array of runs");
+    for (const std::string& key : runKeys())
+        if (doc.contains(key))
+            throw InputError(origin + ": " + key + ": belongs in each entry of runs, not beside them");
+    std::vector<Job> parsed;
+    for (size_t i = 0; i < runs.size(); ++i) {
+        const std::string where = origin + ": runs[" + std::to_string(i) + "]";
+        if (!runs.at(i).is_object()) throw InputError(where + ": must be an object");
+        rejectUnknownKeys(runs.at(i), runKeys(), where + ".");
+        nlohmann::json single = doc;
+        single.erase("runs");
+        for (const auto& [key, value] : runs.at(i).items()) single[key] = value;
+        parsed.push_back(parseJob(single, where, baseDir));
+    }
+    requireOneMaterial(parsed, origin);
+    Job job = std::move(parsed.front());
+    job.document = doc;
+    job.otherRuns.assign(std::make_move_iterator(parsed.begin() + 1), std::make_move_iterator(parsed.end()));
+    return job;
+}
+
 }  // namespace
+
+const std::vector<std::string>& runKeys() {
+    static const std::vector<std::string> keys{"scene",      "camera",     "silhouettes", "reference",
+                                               "video",      "extraction", "track",       "area_track_weight",
+                                               "ground_band", "frame_start", "frame_end", "max_frames",
+                                               "time_offset_s"};
+    return keys;
+}
 
 const char* placementScheduleName(PlacementSchedule schedule) {
     return schedule == PlacementSchedule::ByGeneration ? "by_generation" : "each_evaluation";
@@ -181,8 +238,9 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
                        "track", "area_track_weight", "ground_band", "frame_start", "frame_end", "max_frames",
                        "time_offset_s", "parameters", "fixed", "resolution", "max_generations", "seed", "population",
                        "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method", "alignment_check",
-                       "grid_placements", "grid_placement_schedule", "silhouette_comparison", "fidelity"},
+                       "grid_placements", "grid_placement_schedule", "silhouette_comparison", "fidelity", "runs"},
                       origin + ": ");
+    if (doc.contains("runs")) return parseRuns(doc, origin, baseDir);
     Job job;
     job.document = doc;
 
