@@ -121,6 +121,9 @@ protected:
         std::ofstream(dir_ / "job.json") << doc.dump(1);
         return identify::loadJob(dir_ / "job.json");
     }
+    // Identifies from both runs and from each alone, printing each parameter against `truth`; the
+    // largest relative error over the parameters of each (both, the first run, the second).
+    static std::array<double, 3> identifyFromRunsAndAlone(const struct ColumnJobs& jobs, const std::vector<double>& truth);
     static fs::path dir_;
 };
 fs::path IdentifyLoop::dir_;
@@ -459,63 +462,101 @@ TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
     }
 }
 
-// Several runs of one liquid: the column above and a squatter one of the same volume (5 cm wide,
-// 3.15 cm high), each with its measured front from its own reference run (24 cells, seed 11), in
-// one job whose E is the sum of the runs' E, each scored as a job of its own would score it.
-TEST_F(IdentifyLoop, SeveralRunsOfOneLiquidShareItsParameters) {
-    const std::array<double, 2> widths{0.035, 0.05};
-    json runs = json::array();
+// Two runs of one liquid, `material`: the column above and a low one (5 cm wide, 2 cm high, under half
+// the driving pressure), each with its measured front from its own reference run (seed 11),
+// as a job of both runs and as a job of each alone (without camera and silhouettes; the search
+// settings of jobJson).
+struct ColumnJobs {
+    json both;
+    std::array<json, 2> alone;
+};
+ColumnJobs columnJobs(const json& material, const json& parameters, const std::string& label, const fs::path& dir,
+                      const json& job, int referenceResolution) {
+    const std::array<double, 2> widths{0.035, 0.05}, heights{0.045, 0.02};
+    json shared = job;
+    shared["parameters"] = parameters;
+    for (const char* key : {"scene", "camera", "silhouettes"}) shared.erase(key);
+    ColumnJobs jobs{shared, {shared, shared}};
     for (size_t r = 0; r < widths.size(); ++r) {
-        const double height = 0.035 * 0.045 / widths[r];
-        json scene = sceneJson(kEtaTrue, 24, 11, 20);
-        scene["liquids"][0]["max"] = {widths[r], 0.04, height};
-        const std::string csv = "run" + std::to_string(r) + ".csv";
-        writeMeasuredTrack(scene, {widths[r], 0.02, 0}, {0, 0.02, 0}, dir_ / csv);
-        scene = sceneJson(8.0, 16, 3, 10);
-        scene["liquids"][0]["max"] = {widths[r], 0.04, height};
-        runs.push_back({{"scene", scene},
-                        {"track", {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
-                                   {"origin", {widths[r], 0.02, 0}}, {"direction", {1, 0, 0}}}}});
+        json scene = sceneJson(material.at("viscosity").get<double>(), referenceResolution, 11, 20);
+        scene["material"] = material;
+        scene["liquids"][0]["max"] = {widths[r], 0.04, heights[r]};
+        const std::string csv = label + "_run" + std::to_string(r) + ".csv";
+        writeMeasuredTrack(scene, {widths[r], 0.02, 0}, {0, 0.02, 0}, dir / csv);
+        scene["domain"]["resolution"] = 16;
+        scene["seed"] = 3;
+        scene["frames"] = 10;
+        const json run{{"scene", scene},
+                       {"track", {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
+                                  {"origin", {widths[r], 0.02, 0}}, {"direction", {1, 0, 0}}}}};
+        jobs.both["runs"].push_back(run);
+        jobs.alone[r].update(run);
     }
-    json doc = jobJson();
-    for (const char* key : {"scene", "camera", "silhouettes"}) doc.erase(key);
-    auto single = [&, shared = doc](size_t r) {
-        json one = shared;
-        for (const auto& [key, value] : runs[r].items()) one[key] = value;
-        return one;
-    };
-    doc["runs"] = runs;
+    return jobs;
+}
 
-    // E is the sum of what each run alone scores, on any grid.
-    const identify::Job both = job(doc);
-    ASSERT_EQ(both.otherRuns.size(), 1u);
-    const identify::Evaluation together = identify::evaluate(both, identify::loadObservation(both), {5.0}, 20);
-    std::vector<double> alone;
-    for (size_t r = 0; r < runs.size(); ++r) {
-        const identify::Job one = job(single(r));
-        alone.push_back(identify::evaluate(one, identify::loadObservation(one), {5.0}, 20).E);
-    }
-    ASSERT_EQ(together.runE.size(), 2u);
-    EXPECT_DOUBLE_EQ(together.runE[0], alone[0]);
-    EXPECT_DOUBLE_EQ(together.runE[1], alone[1]);
-    EXPECT_DOUBLE_EQ(together.E, alone[0] + alone[1]);
-
-    // Identified from both runs, and from each alone (printed, for the figures).
+std::array<double, 3> IdentifyLoop::identifyFromRunsAndAlone(const ColumnJobs& jobs, const std::vector<double>& truth) {
     identify::IdentifyOptions options;
     options.writeFields = false;
-    const std::array<std::pair<const char*, json>, 3> jobs{{{"both runs", doc}, {"the tall column", single(0)},
-                                                            {"the squat column", single(1)}}};
-    for (const auto& [label, jobDoc] : jobs) {
+    const std::array<std::pair<const char*, const json*>, 3> cases{
+        {{"both runs", &jobs.both}, {"the tall column", &jobs.alone[0]}, {"the low column", &jobs.alone[1]}}};
+    std::array<double, 3> worst{};
+    for (size_t c = 0; c < cases.size(); ++c) {
         const auto started = std::chrono::steady_clock::now();
-        const identify::IdentificationResult result = identify::identify(job(jobDoc), dir_ / "runs_out", options);
-        const double error = std::abs(result.theta[0] - kEtaTrue) / kEtaTrue;
-        std::printf("[ identify ] from %s: eta = %.4f Pa·s (truth %.1f, error %.1f %%), interval [%.3f, %.3f], "
-                    "%ld evaluations, %.0f s\n", label, result.theta[0], kEtaTrue, 100 * error, result.interval[0][0],
-                    result.interval[0][1], result.evaluations,
+        const identify::IdentificationResult result = identify::identify(job(*cases[c].second), dir_ / "runs_out", options);
+        std::printf("[ identify ] from %s (%ld evaluations, %.0f s):", cases[c].first, result.evaluations,
                     std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
-        if (std::string(label) == "both runs") EXPECT_LT(error, 0.10);
+        for (size_t i = 0; i < truth.size(); ++i) {
+            const double error = std::abs(result.theta[i] - truth[i]) / truth[i];
+            worst[c] = std::max(worst[c], error);
+            std::printf(" %s = %.4f (truth %.2f, error %.1f %%, interval [%.3f, %.3f])",
+                        cases[c].second->at("parameters")[i].at("name").get<std::string>().c_str(), result.theta[i],
+                        truth[i], 100 * error, result.interval[i][0], result.interval[i][1]);
+        }
+        std::printf("\n");
         fs::remove_all(dir_ / "runs_out");
     }
+    return worst;
+}
+
+// Several runs of one liquid in one job: its E is the sum of the runs' E, each scored as a job of
+// its own would score it.
+TEST_F(IdentifyLoop, SeveralRunsOfOneLiquidShareItsParameters) {
+    const json material = {{"density", 1400}, {"viscosity", kEtaTrue}, {"surface_tension", 0.0}};
+    const ColumnJobs jobs = columnJobs(material, jobJson().at("parameters"), "newtonian", dir_, jobJson(), 24);
+
+    // E is the sum of what each run alone scores.
+    const identify::Job both = job(jobs.both);
+    ASSERT_EQ(both.otherRuns.size(), 1u);
+    const identify::Evaluation together = identify::evaluate(both, identify::loadObservation(both), {5.0}, 20);
+    ASSERT_EQ(together.runE.size(), 2u);
+    for (size_t r = 0; r < jobs.alone.size(); ++r) {
+        const identify::Job one = job(jobs.alone[r]);
+        EXPECT_DOUBLE_EQ(together.runE[r], identify::evaluate(one, identify::loadObservation(one), {5.0}, 20).E);
+    }
+    EXPECT_DOUBLE_EQ(together.E, together.runE[0] + together.runE[1]);
+
+    EXPECT_LT(identifyFromRunsAndAlone(jobs, {kEtaTrue})[0], 0.10);
+}
+
+// A shear-thinning liquid (power law, K = 3 Pa·sⁿ, n = 0.6) searched for K and n at once, from both
+// runs and from each alone, on 28 cells against references of 36. It prints the figures and claims
+// nothing: on the CI grids (20 against 24) the two runs together did worse than either alone, here
+// better (tests/bench/FINDINGS.md, "Several runs of one liquid"). About 9 minutes, so it is run by
+// hand (--gtest_also_run_disabled_tests), not in CI.
+TEST_F(IdentifyLoop, DISABLED_SeveralRunsOfAShearThinningLiquidIdentifyItsLaw) {
+    const double K = 3, n = 0.6;
+    const json material = {{"density", 1400},
+                           {"viscosity", 1.0},
+                           {"surface_tension", 0.0},
+                           {"model", {{"type", "power_law"}, {"consistency", K}, {"flow_index", n}}}};
+    const json parameters = {{{"name", "consistency"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 0.1}, {"max", 100.0}},
+                             {{"name", "flow_index"}, {"initial", 1.0}, {"spread", 0.5}, {"min", 0.3}, {"max", 1.5}}};
+    json search = jobJson();
+    search["max_generations"] = 24;
+    search["resolution"] = 28;
+    const ColumnJobs jobs = columnJobs(material, parameters, "power_law", dir_, search, 36);
+    identifyFromRunsAndAlone(jobs, {K, n});
 }
 
 // Runs of one job share one liquid, and each run's keys stay within its entry.

@@ -241,9 +241,6 @@ struct Job {
     // must hold the same material (parseJob refuses them otherwise).
     std::vector<Job> otherRuns;
 };
-// The keys of a job file that belong to one run: with "runs" they are given in each of its entries
-// and not at the top level.
-const std::vector<std::string>& runKeys();
 
 // Parses and validates everything needed before the first simulation; throws InputError naming
 // the file and the field. Relative paths resolve against the job file's folder.

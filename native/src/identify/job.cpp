@@ -165,8 +165,17 @@ FixedParameter parseFixed(const nlohmann::json& p, const Scene& scene, const std
     return fixed;
 }
 
-// The first field in which run `r`'s material differs from the first run's, once every searched
-// parameter holds the first run's value in both (what is searched is the same liquid's by design).
+// The keys of a job file that belong to one run: with "runs" they are given in each of its entries.
+const std::vector<std::string>& runKeys() {
+    static const std::vector<std::string> keys{"scene",      "camera",     "silhouettes", "reference",
+                                               "video",      "extraction", "track",       "area_track_weight",
+                                               "ground_band", "frame_start", "frame_end", "max_frames",
+                                               "time_offset_s"};
+    return keys;
+}
+
+// Refuses runs whose material differs from the first run's, naming the first field that does, once
+// every searched parameter holds the first run's value in both (their starting values may differ).
 void requireOneMaterial(const std::vector<Job>& runs, const std::string& origin) {
     const Job& first = runs.front();
     const nlohmann::json material = sceneToJson(first.scene).at("material");
@@ -214,14 +223,6 @@ Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::pa
 }
 
 }  // namespace
-
-const std::vector<std::string>& runKeys() {
-    static const std::vector<std::string> keys{"scene",      "camera",     "silhouettes", "reference",
-                                               "video",      "extraction", "track",       "area_track_weight",
-                                               "ground_band", "frame_start", "frame_end", "max_frames",
-                                               "time_offset_s"};
-    return keys;
-}
 
 const char* placementScheduleName(PlacementSchedule schedule) {
     return schedule == PlacementSchedule::ByGeneration ? "by_generation" : "each_evaluation";
