@@ -465,7 +465,8 @@ TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
 // Two runs of one liquid, `material`: the column above and a low one (5 cm wide, 2 cm high, under half
 // the driving pressure), each with its measured front from its own reference run (seed 11),
 // as a job of both runs and as a job of each alone (without camera and silhouettes; the search
-// settings of jobJson).
+// settings of `job`). The runs' scenes are the references' on 16 cells with seed 3; what the job
+// searches is overwritten in them at every evaluation.
 struct ColumnJobs {
     json both;
     std::array<json, 2> alone;
