@@ -515,6 +515,10 @@ std::array<double, 3> IdentifyLoop::identifyFromRunsAndAlone(const ColumnJobs& j
                         truth[i], 100 * error, result.interval[i][0], result.interval[i][1]);
         }
         std::printf("\n");
+        if (cases[c].second->contains("runs")) {
+            EXPECT_EQ(result.document.at("run_E").size(), 2u);
+            EXPECT_GT(result.document.at("run_E")[1].get<double>(), 0.0);
+        }
         fs::remove_all(dir_ / "runs_out");
     }
     return worst;

@@ -1109,6 +1109,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                           {"per_fidelity", perFidelity},
                           {"alignment_check_s", alignmentCheckSeconds}}}};
     if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
+    // With several runs, how well θ* fits each: its evaluation's E per run, on the placement its
+    // fields come from.
+    for (const json& e : evaluated)
+        if (e.contains("run_E") && e.at("theta") == best.at("theta") &&
+            e.value("grid_shift", 0.0) == best.at("grid_shift").get<double>()) {
+            doc["run_E"] = e.at("run_E");
+            break;
+        }
     if (options.writeFields) {
         const auto fieldsStart = Clock::now();
         const double bestShift = best.at("grid_shift").get<double>();
