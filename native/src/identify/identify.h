@@ -270,8 +270,9 @@ struct Observation {
 };
 
 // When the job names a video but no extracted silhouettes, extracts them into OUT/reference with
-// job.extraction and points job.referenceDir there (a further run k's into OUT/run<k>/reference). A finished extraction is reused while
-// referenceSource(job), kept beside it as source.json, is unchanged.
+// job.extraction and points job.referenceDir there (a further run k's into OUT/run<k>/reference).
+// A finished extraction is reused while referenceSource(job), kept beside it as source.json, is
+// unchanged.
 void prepareReference(Job& job, const std::filesystem::path& outDir);
 // What a video reference is extracted from: the video, clean plate and exclusion mask files (size,
 // time written) and the job's extraction settings with the engine's defaults filled in, so that
