@@ -406,22 +406,29 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
 
 Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
                     const fs::path& fieldsDir, double gridShift) {
+    // What another simulation of the same evaluation (a grid placement, a further run) adds: its
+    // silhouette area, its doubts and its costs (per simulated frame, for the time budget's
+    // prediction of a longer clip).
+    const auto add = [](Evaluation& ev, const Evaluation& other) {
+        ev.simulatedPixels += other.simulatedPixels;
+        ev.liquidLost = std::max(ev.liquidLost, other.liquidLost);
+        ev.unconvergedFrames += other.unconvergedFrames;
+        ev.seconds += other.seconds;
+        ev.simulationSeconds += other.simulationSeconds;
+        ev.silhouetteSeconds += other.silhouetteSeconds;
+        ev.fieldsSeconds += other.fieldsSeconds;
+        if (other.frameSeconds.size() > ev.frameSeconds.size()) ev.frameSeconds.resize(other.frameSeconds.size(), 0.0);
+        for (size_t i = 0; i < other.frameSeconds.size(); ++i) ev.frameSeconds[i] += other.frameSeconds[i];
+    };
     const int n = job.placementSchedule == PlacementSchedule::EachEvaluation ? job.gridPlacements : 1;
     // The first placement is the grid as asked for, and only it writes the fields.
     Evaluation ev = evaluateOnGrid(job, obs, theta, resolution, fieldsDir, gridShift);
     for (int k = 1; k < n; ++k) {
         const Evaluation other = evaluateOnGrid(job, obs, theta, resolution, {}, gridShift + double(k) / n);
+        add(ev, other);
         ev.E += other.E;
-        ev.simulatedPixels += other.simulatedPixels;
-        ev.liquidLost = std::max(ev.liquidLost, other.liquidLost);
-        ev.unconvergedFrames += other.unconvergedFrames;
         if (ev.trackError) ev.trackError = std::hypot(*ev.trackError, *other.trackError);
         for (size_t i = 0; i < ev.frameE.size(); ++i) ev.frameE[i] += other.frameE[i];
-        ev.seconds += other.seconds;
-        ev.simulationSeconds += other.simulationSeconds;
-        ev.silhouetteSeconds += other.silhouetteSeconds;
-        ev.fieldsSeconds += other.fieldsSeconds;
-        for (size_t i = 0; i < ev.frameSeconds.size(); ++i) ev.frameSeconds[i] += other.frameSeconds[i];
     }
     ev.E /= n;
     ev.simulatedPixels /= n;
@@ -430,18 +437,9 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
     if (!job.otherRuns.empty()) ev.runE = {ev.E};
     for (size_t k = 0; k < job.otherRuns.size(); ++k) {
         const Evaluation run = evaluate(job.otherRuns[k], obs.otherRuns.at(k), theta, resolution, {}, gridShift);
+        add(ev, run);
         ev.runE.push_back(run.E);
         ev.E += run.E;
-        ev.simulatedPixels += run.simulatedPixels;
-        ev.liquidLost = std::max(ev.liquidLost, run.liquidLost);
-        ev.unconvergedFrames += run.unconvergedFrames;
-        ev.seconds += run.seconds;
-        ev.simulationSeconds += run.simulationSeconds;
-        ev.silhouetteSeconds += run.silhouetteSeconds;
-        ev.fieldsSeconds += run.fieldsSeconds;
-        // Per simulated frame over the runs, for the time budget's prediction of a longer clip.
-        if (run.frameSeconds.size() > ev.frameSeconds.size()) ev.frameSeconds.resize(run.frameSeconds.size(), 0.0);
-        for (size_t i = 0; i < run.frameSeconds.size(); ++i) ev.frameSeconds[i] += run.frameSeconds[i];
     }
     return ev;
 }

@@ -234,13 +234,12 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": format: expected \"viscoscope.job\"");
     if (doc.value("version", nlohmann::json()) != nlohmann::json(1))
         throw InputError(origin + ": version: expected 1, got " + doc.value("version", nlohmann::json()).dump());
-    rejectUnknownKeys(doc,
-                      {"format", "version", "scene", "camera", "silhouettes", "reference", "video", "extraction",
-                       "track", "area_track_weight", "ground_band", "frame_start", "frame_end", "max_frames",
-                       "time_offset_s", "parameters", "fixed", "resolution", "max_generations", "seed", "population",
-                       "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method", "alignment_check",
-                       "grid_placements", "grid_placement_schedule", "silhouette_comparison", "fidelity", "runs"},
-                      origin + ": ");
+    std::vector<std::string> known{"format", "version", "parameters", "fixed", "resolution", "max_generations", "seed",
+                                   "population", "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method",
+                                   "alignment_check", "grid_placements", "grid_placement_schedule",
+                                   "silhouette_comparison", "fidelity", "runs"};
+    known.insert(known.end(), runKeys().begin(), runKeys().end());
+    rejectUnknownKeys(doc, known, origin + ": ");
     if (doc.contains("runs")) return parseRuns(doc, origin, baseDir);
     Job job;
     job.document = doc;
