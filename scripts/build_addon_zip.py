@@ -22,7 +22,7 @@ MANIFEST = os.path.join(REPO, "blender_manifest.toml")
 PACKAGE = "viscoscope"
 # Helper scripts the engine runs (plots, synthetic references). It looks for them in scripts/ of the
 # nearest folder above its executable (native/src/cli/scripts.cpp): viscoscope/scripts/ for bin/viscoscope.
-ENGINE_SCRIPTS = ("plot_identification.py", "render_reference.py")
+ENGINE_SCRIPTS = ("plot_identification.py", "plot_diagnosis.py", "render_reference.py")
 
 
 def bl_info_version(init_path=os.path.join(ADDON, "__init__.py")):

@@ -270,6 +270,29 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
 // A second run on a folder in use would resume from the first's half-written state and answer
 // otherwise: it is refused at once, naming the process; once that process is gone (even by kill -9,
 // which leaves the lock file behind) the folder is free again.
+// diagnose refuses in one line, before any fit: an effect it does not know, one the job cannot take
+// when asked for by name, and a reference too short to hold frames out of the fit.
+TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
+    const auto expectRefused = [&](const std::string& arguments, const fs::path& jobFile, const std::string& fragment) {
+        const CommandResult r = run("diagnose " + jobFile.string() + " --out " + (dir_ / "diagnosis").string() +
+                                    " --progress json --no-plots " + arguments);
+        EXPECT_EQ(r.exitCode, 2) << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << "stderr: " << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "stderr: " << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / "diagnosis" / "diagnosis.json"));
+        EXPECT_FALSE(fs::exists(dir_ / "diagnosis" / "fits"));
+        std::printf("[ diagnose ] %s\n", r.err.substr(0, r.err.size() - 1).c_str());
+    };
+    writeSlumpMasks(dir_ / "reference_long", 96, 64, std::vector<double>(8, 1.0));
+    json doc = job();
+    doc["silhouettes"] = "reference_long";
+    const fs::path jobFile = writeJob(doc);
+    expectRefused("--effects elasticity", jobFile, "unknown effect \"elasticity\"");
+    expectRefused("--effects side_walls", jobFile, "side_walls: the scene has no channel solid");
+    // Two masks (frames 2 and 4): nothing left to predict after the three a fit needs at least.
+    expectRefused("", writeJob(job(), "short.json"), "compared frames, too few to fit 3 and predict at least 2 more");
+}
+
 TEST_F(CliIdentify, ASecondRunOnAFolderInUseIsRefused) {
     const fs::path jobFile = writeJob(job(3));
     const fs::path out = dir_ / "shared_out";

@@ -5,6 +5,7 @@
 // size (identify draws its own silhouettes with the same exact fill, its default, at that size).
 // Scene: a viscous column of 1400 kg/m³ liquid collapsing along x (front speed ∝ 1/η early on).
 #include "identify/identify.h"
+#include "identify/search_state.h"
 
 #include "sim/sim.h"
 #include "surface/surface.h"
@@ -412,19 +413,20 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
-// The reference run of `scene` (its resolution and seed) sampled 60 times a second for a third of a
-// second into a CSV, as a lab would measure it: the front along x from `gate`, and the reach from the
+// The reference run of `scene` (its resolution and seed) sampled `fps` times a second for `frames`
+// frames (by default 60 times a second for a third of a second) into a CSV, as a lab would measure it: the front along x from `gate`, and the reach from the
 // vertical through `wall`.
-void writeMeasuredTrack(json scene, const Eigen::Vector3d& gate, const Eigen::Vector3d& wall, const fs::path& file) {
-    scene["fps"] = 60;
+void writeMeasuredTrack(json scene, const Eigen::Vector3d& gate, const Eigen::Vector3d& wall, const fs::path& file,
+                        int frames = 20, int fps = 60) {
+    scene["fps"] = fps;
     sim::Simulation reference(parseScene(scene, "reference scene"));
     const GroundObservables ground{0.0, 0.005};
     std::ofstream csv(file);
     csv << "time_s,front_m,radius_m\n";
-    for (int frame = 0; frame <= 20; ++frame) {
+    for (int frame = 0; frame <= frames; ++frame) {
         if (frame > 0) reference.advanceFrame();
         const auto& particles = reference.particles().position;
-        csv << frame / 60.0 << "," << frontAlongGround(particles, gate, Eigen::Vector3d::UnitX(), ground) << ","
+        csv << double(frame) / fps << "," << frontAlongGround(particles, gate, Eigen::Vector3d::UnitX(), ground) << ","
             << puddleDiameter(particles, wall, ground) / 2 << "\n";
     }
 }
@@ -459,6 +461,58 @@ TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
         EXPECT_EQ(result.document.at("frames").get<int>(), 10) << observable;
         EXPECT_LT(trackError, 0.05) << observable;
         fs::remove_all(dir_ / "track_out");
+    }
+}
+
+// A yield stress nobody declared, and a Newtonian control: the column's front measured from a
+// reference run (24 cells, seed 11) of a Bingham liquid (τ_y = 100 Pa, K = 3 Pa·s), and of a
+// Newtonian one (η = 3 Pa·s), 30 times a second for `kDiagnosisFrames` frames. diagnose fits η on the
+// job's 20-cell grid (seed 3), then shear thinning and a yield stress, each to the first two thirds
+// of the front, and predicts the rest.
+TEST_F(IdentifyLoop, DiagnosisFindsAHiddenYieldStressAndNoEffectInANewtonianControl) {
+    constexpr int kDiagnosisFrames = 30, kDiagnosisFps = 15;
+    const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0);
+    const json bingham{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0},
+                       {"model", {{"type", "herschel_bulkley"}, {"yield_stress", 60.0}, {"consistency", 10.0}, {"flow_index", 1.0}}}};
+    const json newtonian{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0}};
+    for (const auto& [label, material] : {std::pair<const char*, json>{"bingham", bingham}, {"newtonian", newtonian}}) {
+        json reference = sceneJson(10.0, 24, 11, kDiagnosisFrames);
+        reference["material"] = material;
+        const std::string csv = std::string(label) + "_front.csv";
+        writeMeasuredTrack(reference, gate, wall, dir_ / csv, kDiagnosisFrames, kDiagnosisFps);
+        json doc = jobJson();
+        doc.erase("camera");
+        doc.erase("silhouettes");
+        json scene = sceneJson(10.0, 16, 3, kDiagnosisFrames);
+        scene["fps"] = kDiagnosisFps;
+        doc["scene"] = scene;
+        doc["track"] = {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
+                        {"origin", {gate.x(), gate.y(), gate.z()}}, {"direction", {1, 0, 0}}};
+        doc["max_generations"] = 12;
+        identify::DiagnoseOptions options;
+        options.effects = {"shear_thinning", "yield_stress"};
+        const auto started = std::chrono::steady_clock::now();
+        const identify::Diagnosis diagnosis = identify::diagnose(job(doc), dir_ / (std::string(label) + "_diagnosis"), options);
+        const json& d = diagnosis.document;
+        std::printf("[ diagnose ] %s (%.0f s): %s; base eta %.3f, held-out E %.4g, track error %.2f %% -> %.2f %%\n",
+                    label, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(),
+                    d.at("conclusion").get<std::string>().c_str(), diagnosis.base.theta[0], diagnosis.base.heldOutE,
+                    100 * d.at("errors").at("track_error").at("before").get<double>(),
+                    100 * d.at("errors").at("track_error").at("after").get<double>());
+        for (const identify::ModelFit& fit : diagnosis.candidates) {
+            std::printf("[ diagnose ]   %s:", fit.model.c_str());
+            for (size_t i = 0; i < fit.theta.size(); ++i) std::printf(" %s = %.4g", fit.parameters[i].c_str(), fit.theta[i]);
+            std::printf("; held-out E %.4g, BIC %.1f (base %.1f), %ld evaluations\n", fit.heldOutE, fit.bic,
+                        diagnosis.base.bic, fit.evaluations);
+        }
+        if (std::string(label) == "bingham") {
+            ASSERT_TRUE(diagnosis.chosen.has_value());
+            EXPECT_EQ(diagnosis.candidates[*diagnosis.chosen].model, "yield_stress");
+            EXPECT_LE(d.at("errors").at("track_error").at("after").get<double>(),
+                      0.5 * d.at("errors").at("track_error").at("before").get<double>());
+        } else {
+            EXPECT_FALSE(diagnosis.chosen.has_value()) << d.at("conclusion");
+        }
     }
 }
 
@@ -601,26 +655,35 @@ TEST_F(IdentifyLoop, RunsThatDisagreeOnTheMaterialAreRefused) {
 // coarse best, where the full-fidelity phase restarts, not from the scan's far and slow points, and
 // the frames the full clip adds cost what the coarse clip's last third did.
 TEST(TimeBudget, PredictsAFullEvaluationFromTheCoarseOnesNearTheBest) {
+    using identify::EvaluationRecord;
+    using identify::Fidelity;
     using identify::predictedFullEvaluationSeconds;
-    const auto record = [](const char* fidelity, double theta, double E, double seconds, std::vector<double> frames) {
-        return json{{"fidelity", fidelity}, {"theta", {theta}}, {"E", E}, {"seconds", seconds}, {"frame_s", frames}};
+    const auto record = [](Fidelity fidelity, double theta, double E, double seconds, std::vector<double> frames) {
+        EvaluationRecord r;
+        r.fidelity = fidelity;
+        r.evaluation.theta = {theta};
+        r.evaluation.E = E;
+        r.evaluation.seconds = seconds;
+        r.evaluation.frameSeconds = frames;
+        return r;
     };
     const std::vector<double> even(60, 0.2), dearerLate = [] {
         std::vector<double> f(60, 0.1);
         for (int i = 40; i < 60; ++i) f[i] = 0.4;
         return f;
     }();
-    json evaluated = json::array({record("coarse", 1, 5, 70, even), record("coarse", 10, 3, 30, even),
-                                  record("coarse", 100, 2, 20, even), record("coarse", 300, 1, 12, even),
-                                  record("coarse", 250, 1.5, 14, even), record("full", 300, 0.5, 1000, even)});
+    const Fidelity coarse = Fidelity::Coarse;
+    std::vector<EvaluationRecord> evaluated{record(coarse, 1, 5, 70, even),    record(coarse, 10, 3, 30, even),
+                                            record(coarse, 100, 2, 20, even),  record(coarse, 300, 1, 12, even),
+                                            record(coarse, 250, 1.5, 14, even), record(Fidelity::Full, 300, 0.5, 1000, even)};
     // Frames 0–59 coarse, 0–179 full: three times the frames at the same rate.
-    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 48, 48, 59, 179), 3 * (12 + 14) / 2.0, 1e-9);
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, {48, 48, 59, 179}), 3 * (12 + 14) / 2.0, 1e-9);
     // A coarser grid: (48/24)⁴ as many cells × steps.
-    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 24, 48, 59, 179), 16 * 3 * (12 + 14) / 2.0, 1e-9);
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, {24, 48, 59, 179}), 16 * 3 * (12 + 14) / 2.0, 1e-9);
     // Cheap early frames: the 120 added frames at the last third's 0.4 s, against 12 s for 60.
-    evaluated = json::array({record("coarse", 300, 1, 12, dearerLate)});
-    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, 48, 48, 59, 179), 12 * (12 + 120 * 0.4) / 12, 1e-9);
-    EXPECT_EQ(predictedFullEvaluationSeconds(json::array(), 48, 48, 59, 179), 0.0);
+    evaluated = {record(coarse, 300, 1, 12, dearerLate)};
+    EXPECT_NEAR(predictedFullEvaluationSeconds(evaluated, {48, 48, 59, 179}), 12 * (12 + 120 * 0.4) / 12, 1e-9);
+    EXPECT_EQ(predictedFullEvaluationSeconds({}, {48, 48, 59, 179}), 0.0);
 }
 
 // OUT/fields holds θ*'s hidden fields for every frame. They are the best full-fidelity evaluation's

@@ -23,6 +23,7 @@ Command addExtractCommand(CLI::App& app);
 Command addScoreCommand(CLI::App& app);
 Command addCameraCommand(CLI::App& app);
 Command addIdentifyCommand(CLI::App& app);
+Command addDiagnoseCommand(CLI::App& app);
 Command addSynthCommand(CLI::App& app);
 Command addCompareCommand(CLI::App& app);
 Command addSchemaCommand(CLI::App& app);

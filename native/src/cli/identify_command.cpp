@@ -29,16 +29,6 @@ struct IdentifyArguments {
     bool noPlots = false, noFields = false;
 };
 
-// convergence.png and landscape.png via matplotlib; a missing plotter is a note, not an error.
-std::string makePlots(const fs::path& outDir) {
-    const auto script = findScript("plot_identification.py");
-    if (!script) return "skipped: scripts/plot_identification.py not found";
-    if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0)
-        return "skipped: /usr/bin/python3 with matplotlib not available";
-    const std::string command = "/usr/bin/python3 '" + script->string() + "' '" + outDir.string() + "' > /dev/null 2>&1";
-    return std::system(command.c_str()) == 0 ? "ok" : "failed: " + command;
-}
-
 int runIdentify(const IdentifyArguments& args) {
     openvdb::initialize();
     identify::Job job = identify::loadJob(args.job);
@@ -66,26 +56,12 @@ int runIdentify(const IdentifyArguments& args) {
     options.threads = args.threads;
     options.writeFields = !args.noFields;
     options.onWarning = [&](const std::string& warning) { progress.warn(warning); };
-    options.onGeneration = [&](const identify::GenerationReport& r) {
-        nlohmann::json event{{"event", "progress"},      {"stage", "identify"},         {"generation", r.generation},
-                             {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},
-                             {"fidelity", r.coarse ? "coarse" : "full"},
-                             {"sigma", r.sigma},         {"elapsed", r.elapsed},         {"remaining_s", r.remaining}};
-        if (!r.bestTheta.empty()) {
-            nlohmann::json theta = nlohmann::json::object();
-            for (size_t i = 0; i < job.parameters.size(); ++i) {
-                theta[job.parameters[i].name()] = r.bestTheta[i];
-                if (job.parameters[i].name() == "viscosity") event["best_eta"] = r.bestTheta[i];
-            }
-            event["best_theta"] = theta;
-        }
-        if (std::isfinite(r.bestE)) event["best_E"] = r.bestE;
-        if (r.resumed) event["resumed"] = true;
-        progress.report(event);
-    };
+    std::vector<std::string> names;
+    for (const identify::ParameterSpec& p : job.parameters) names.push_back(p.name());
+    options.onGeneration = [&](const identify::GenerationReport& r) { progress.report(generationEvent(names, r)); };
     try {
         const identify::IdentificationResult result = identify::identify(job, args.outDir, options);
-        std::string plots = args.noPlots ? "skipped: --no-plots" : makePlots(args.outDir);
+        std::string plots = args.noPlots ? "skipped: --no-plots" : plot("plot_identification.py", args.outDir);
         nlohmann::json done{{"event", "done"},          {"stage", "identify"},         {"theta", result.theta},
                             {"interval", result.interval}, {"interval_method", result.intervalMethod},
                             {"E", result.E},             {"stop", identify::toString(result.stop)},

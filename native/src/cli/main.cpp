@@ -33,6 +33,7 @@ int main(int argc, char** argv) {
         cli::addScoreCommand(app),
         cli::addCameraCommand(app),
         cli::addIdentifyCommand(app),
+        cli::addDiagnoseCommand(app),
         cli::addSynthCommand(app),
         cli::addCompareCommand(app),
         cli::addSchemaCommand(app),

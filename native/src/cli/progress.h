@@ -2,9 +2,13 @@
 // Blender add-on reads), a short human line on stderr (`text`), or nothing.
 #pragma once
 
+#include "identify/identify.h"
+
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <iostream>
+#include <vector>
 #include <string>
 
 namespace viscoscope::cli {
@@ -31,5 +35,25 @@ public:
 private:
     std::string format_;
 };
+
+// An identification's progress after a generation: identify's, and each fit of diagnose's.
+// `names`: the searched parameters'.
+inline nlohmann::json generationEvent(const std::vector<std::string>& names, const identify::GenerationReport& r) {
+    nlohmann::json event{{"event", "progress"},         {"stage", "identify"},           {"generation", r.generation},
+                         {"generations", r.generations}, {"evaluations", r.evaluations}, {"resolution", r.resolution},
+                         {"fidelity", r.coarse ? "coarse" : "full"},
+                         {"sigma", r.sigma},             {"elapsed", r.elapsed},         {"remaining_s", r.remaining}};
+    if (!r.bestTheta.empty()) {
+        nlohmann::json theta = nlohmann::json::object();
+        for (size_t i = 0; i < names.size() && i < r.bestTheta.size(); ++i) {
+            theta[names[i]] = r.bestTheta[i];
+            if (names[i] == "viscosity") event["best_eta"] = r.bestTheta[i];
+        }
+        event["best_theta"] = theta;
+    }
+    if (std::isfinite(r.bestE)) event["best_E"] = r.bestE;
+    if (r.resumed) event["resumed"] = true;
+    return event;
+}
 
 }  // namespace viscoscope::cli

@@ -21,4 +21,13 @@ std::optional<fs::path> findScript(const std::string& name) {
     return std::nullopt;
 }
 
+std::string plot(const std::string& name, const fs::path& outDir) {
+    const auto script = findScript(name);
+    if (!script) return "skipped: scripts/" + name + " not found";
+    if (std::system("/usr/bin/python3 -c 'import matplotlib' > /dev/null 2>&1") != 0)
+        return "skipped: /usr/bin/python3 with matplotlib not available";
+    const std::string command = "/usr/bin/python3 '" + script->string() + "' '" + outDir.string() + "' > /dev/null 2>&1";
+    return std::system(command.c_str()) == 0 ? "ok" : "failed: " + command;
+}
+
 }  // namespace viscoscope::cli

@@ -311,6 +311,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
     const int lastFrame = lastSimFrame(obs);
     const size_t count = obs.simFrames.size();
     ev.frameE.assign(count, 0.0);
+    if (job.measuredTrack) ev.trackSimulated.assign(count, NAN);
     std::vector<double> areas(count, 0.0);
     // The measured track's simulated values, where it is compared.
     std::vector<double> trackSimulated, trackMeasured;
@@ -334,7 +335,8 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
         const bool compared = std::find(obs.simFrames.begin(), obs.simFrames.end(), frame) != obs.simFrames.end();
         for (size_t i = 0; i < obs.measured.size(); ++i)
             if (obs.simFrames[i] == frame && std::isfinite(obs.measured[i])) {
-                trackSimulated.push_back(simulatedObservable(*job.measuredTrack, simulation, trackGround));
+                ev.trackSimulated[i] = simulatedObservable(*job.measuredTrack, simulation, trackGround);
+                trackSimulated.push_back(ev.trackSimulated[i]);
                 trackMeasured.push_back(obs.measured[i]);
             }
         if ((!compared || !silhouettes) && !writeFields) {
@@ -429,11 +431,13 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         ev.E += other.E;
         if (ev.trackError) ev.trackError = std::hypot(*ev.trackError, *other.trackError);
         for (size_t i = 0; i < ev.frameE.size(); ++i) ev.frameE[i] += other.frameE[i];
+        for (size_t i = 0; i < ev.trackSimulated.size(); ++i) ev.trackSimulated[i] += other.trackSimulated[i];
     }
     ev.E /= n;
     ev.simulatedPixels /= n;
     if (ev.trackError) *ev.trackError /= std::sqrt(double(n));  // the RMS over the placements
     for (double& e : ev.frameE) e /= n;
+    for (double& value : ev.trackSimulated) value /= n;
     if (!job.otherRuns.empty()) ev.runE = {ev.E};
     for (size_t k = 0; k < job.otherRuns.size(); ++k) {
         const Evaluation run = evaluate(job.otherRuns[k], obs.otherRuns.at(k), theta, resolution, {}, gridShift);

@@ -29,6 +29,10 @@ json toJson(const Evaluation& e) {
              {"fields_s", e.fieldsSeconds},
              {"frame_s", e.frameSeconds}};
     if (e.trackError) doc["track_error"] = *e.trackError;
+    if (!e.trackSimulated.empty()) {
+        json& values = doc["track_simulated"] = json::array();
+        for (double v : e.trackSimulated) values.push_back(std::isfinite(v) ? json(v) : json());
+    }
     if (!e.runE.empty()) doc["run_E"] = e.runE;
     if (e.fields)
         doc["fields"] = {{"frames", e.fields->frames},
@@ -52,6 +56,8 @@ Evaluation evaluationFromJson(const json& doc) {
     e.fieldsSeconds = doc.at("fields_s").get<double>();
     e.frameSeconds = doc.at("frame_s").get<std::vector<double>>();
     if (doc.contains("track_error")) e.trackError = doc.at("track_error").get<double>();
+    if (doc.contains("track_simulated"))
+        for (const json& v : doc.at("track_simulated")) e.trackSimulated.push_back(v.is_null() ? NAN : v.get<double>());
     if (doc.contains("run_E")) e.runE = doc.at("run_E").get<std::vector<double>>();
     if (doc.contains("fields")) {
         const json& f = doc.at("fields");

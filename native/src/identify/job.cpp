@@ -118,40 +118,6 @@ void requireWithinDeclaredBounds(const SceneParameter& parameter, double value, 
         throw InputError(where + ": " + problem + " (" + parameter.name + "'s physical bounds)");
 }
 
-// Bounds and start default to the declaration's; a solid's dimensions to its value in the scene, and
-// a factor 2 either side of it.
-ParameterSpec parseParameter(const nlohmann::json& p, const Scene& scene, const std::string& where) {
-    ParameterSpec spec;
-    spec.parameter = namedParameter(p, scene, where);
-    rejectUnknownKeys(p, {"name", "initial", "spread", "min", "max", "lower", "upper", "log"}, where + ".");
-    const ParameterDeclaration& d = *spec.parameter.declaration;
-    if (!d.searchable) throw InputError(where + ".name: \"" + spec.name() + "\" cannot be searched; fix it instead");
-    const double sceneValue = parameterValue(scene, spec.parameter);
-    spec.initial = optionalNumber(p, "initial", std::isnan(d.searchInitial) ? sceneValue : d.searchInitial, where);
-    spec.spread = optionalNumber(p, "spread", spec.initial, where);
-    spec.lower = bound(p, "min", "lower", std::isnan(d.searchLower) ? sceneValue / 2 : d.searchLower, where);
-    spec.upper = bound(p, "max", "upper", std::isnan(d.searchUpper) ? sceneValue * 2 : d.searchUpper, where);
-    if (p.contains("log") && p.at("log") != nlohmann::json(true))
-        throw InputError(where + ".log: only log-space search is supported (log: true)");
-    if (spec.lower <= 0)
-        throw InputError(where + ".min: must be > 0 (the search is in log space), got " + formatNumber(spec.lower) +
-                         (sceneValue == 0 ? " (the scene's value is 0: give min and max)" : ""));
-    requireWithinDeclaredBounds(spec.parameter, spec.lower, where + ".min");
-    requireWithinDeclaredBounds(spec.parameter, spec.upper, where + ".max");
-    if (spec.lower > spec.upper)
-        throw InputError(where + ": bounds: lower " + formatNumber(spec.lower) + " > upper " + formatNumber(spec.upper));
-    if (spec.initial < spec.lower || spec.initial > spec.upper)
-        throw InputError(where + ".initial: " + formatNumber(spec.initial) + " is outside the bounds [" +
-                         formatNumber(spec.lower) + ", " + formatNumber(spec.upper) + "]");
-    if (spec.spread <= 0) throw InputError(where + ".spread: must be > 0");
-    // The search clips its spread to a third of the interval; one wider than the whole interval is a
-    // mistake, not a request to be clipped silently.
-    if (p.contains("spread") && spec.logSpread() > spec.logRange())
-        throw InputError(where + ".spread: " + formatNumber(spec.spread) + " from " + formatNumber(spec.initial) +
-                         " is a step wider than the whole interval [" + formatNumber(spec.lower) + ", " +
-                         formatNumber(spec.upper) + "] searched in log space");
-    return spec;
-}
 
 // {"name", "value", "uncertainty"}: the standard uncertainty (same unit), 0 when not known.
 FixedParameter parseFixed(const nlohmann::json& p, const Scene& scene, const std::string& where) {
@@ -223,6 +189,41 @@ Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::pa
 }
 
 }  // namespace
+
+// Bounds and start default to the declaration's; a solid's dimensions to its value in the scene, and
+// a factor 2 either side of it.
+ParameterSpec parseSearchedParameter(const nlohmann::json& p, const Scene& scene, const std::string& where) {
+    ParameterSpec spec;
+    spec.parameter = namedParameter(p, scene, where);
+    rejectUnknownKeys(p, {"name", "initial", "spread", "min", "max", "lower", "upper", "log"}, where + ".");
+    const ParameterDeclaration& d = *spec.parameter.declaration;
+    if (!d.searchable) throw InputError(where + ".name: \"" + spec.name() + "\" cannot be searched; fix it instead");
+    const double sceneValue = parameterValue(scene, spec.parameter);
+    spec.initial = optionalNumber(p, "initial", std::isnan(d.searchInitial) ? sceneValue : d.searchInitial, where);
+    spec.spread = optionalNumber(p, "spread", spec.initial, where);
+    spec.lower = bound(p, "min", "lower", std::isnan(d.searchLower) ? sceneValue / 2 : d.searchLower, where);
+    spec.upper = bound(p, "max", "upper", std::isnan(d.searchUpper) ? sceneValue * 2 : d.searchUpper, where);
+    if (p.contains("log") && p.at("log") != nlohmann::json(true))
+        throw InputError(where + ".log: only log-space search is supported (log: true)");
+    if (spec.lower <= 0)
+        throw InputError(where + ".min: must be > 0 (the search is in log space), got " + formatNumber(spec.lower) +
+                         (sceneValue == 0 ? " (the scene's value is 0: give min and max)" : ""));
+    requireWithinDeclaredBounds(spec.parameter, spec.lower, where + ".min");
+    requireWithinDeclaredBounds(spec.parameter, spec.upper, where + ".max");
+    if (spec.lower > spec.upper)
+        throw InputError(where + ": bounds: lower " + formatNumber(spec.lower) + " > upper " + formatNumber(spec.upper));
+    if (spec.initial < spec.lower || spec.initial > spec.upper)
+        throw InputError(where + ".initial: " + formatNumber(spec.initial) + " is outside the bounds [" +
+                         formatNumber(spec.lower) + ", " + formatNumber(spec.upper) + "]");
+    if (spec.spread <= 0) throw InputError(where + ".spread: must be > 0");
+    // The search clips its spread to a third of the interval; one wider than the whole interval is a
+    // mistake, not a request to be clipped silently.
+    if (p.contains("spread") && spec.logSpread() > spec.logRange())
+        throw InputError(where + ".spread: " + formatNumber(spec.spread) + " from " + formatNumber(spec.initial) +
+                         " is a step wider than the whole interval [" + formatNumber(spec.lower) + ", " +
+                         formatNumber(spec.upper) + "] searched in log space");
+    return spec;
+}
 
 const char* placementScheduleName(PlacementSchedule schedule) {
     return schedule == PlacementSchedule::ByGeneration ? "by_generation" : "each_evaluation";
@@ -323,7 +324,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     std::set<std::string> names;
     for (size_t i = 0; i < doc.at("parameters").size(); ++i) {
         const std::string where = origin + ": parameters[" + std::to_string(i) + "]";
-        ParameterSpec spec = parseParameter(doc.at("parameters").at(i), job.scene, where);
+        ParameterSpec spec = parseSearchedParameter(doc.at("parameters").at(i), job.scene, where);
         if (!names.insert(spec.name()).second) throw InputError(where + ".name: \"" + spec.name() + "\" twice");
         job.parameters.push_back(spec);
     }

@@ -1,0 +1,413 @@
+// Diagnosis: fit the base model and each candidate effect to the first part of every run, predict
+// the rest, and keep an effect only when it earns its parameters there.
+//
+// Out of sample, because in sample any added parameter lowers E: the fit sees each run's first
+// fitShare of compared frames, and the held-out later frames are where a missing effect shows most
+// (a front that stops in the footage but not in the simulation, a flow that slows differently). A
+// candidate is chosen when (a) its held-out E is below (1 − kHeldOutGain) of the base's and (b) its
+// BIC over the fitted frames is below the base's; of those, the one with the least held-out E.
+#include "identify/diagnosis.h"
+
+#include "sim/sim.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+namespace viscoscope::identify {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+namespace {
+
+// The held-out improvement a candidate must make: a fifth of the base's held-out E, so that a
+// candidate which only moves within the fits' own scatter (grid, seed) is not taken for an effect.
+constexpr double kHeldOutGain = 0.2;
+// Warm starts: the base's searched parameters start at the base fit (log spread 0.5 around it),
+// an effect's new parameters at their declaration's start with a wide log spread.
+constexpr double kWarmLogSpread = 0.5;
+constexpr double kNewLogSpread = 1.5;
+constexpr double kStartFlowIndex = 0.8;
+
+const std::vector<Effect> kEffects = {
+    {"shear_thinning", "power law η = K γ̇^(n−1), n ≤ 1, in place of η: K and n searched",
+     "Ostwald–de Waele power law; a gravity current spreads as t^{n/(3n+5)} (DESIGN.md)"},
+    {"yield_stress", "Bingham liquid (Herschel–Bulkley with n = 1) in place of η: τ_y and K searched",
+     "Herschel & Bulkley 1926; the arrest radius of Roussel & Coussot 2005"},
+    {"wall_slip", "Navier slip at solid walls: the slip length searched beside the base's parameters",
+     "Navier 1823; the film check in sim_physics_test"},
+    {"side_walls", "the width of the scene's channel searched beside the base's parameters",
+     "geometry the footage does not show: a channel's side walls slow the flow at every time"},
+};
+
+json searched(const std::string& name, double initial, double logSpread) {
+    return {{"name", name}, {"initial", initial}, {"spread", initial * std::expm1(logSpread)}};
+}
+
+// ρ g h₀, h₀ the height the liquid spans at the start (along gravity); 0 without liquid at the
+// start (emitters) or gravity.
+double hydrostaticStress(const Scene& scene) {
+    const sim::Simulation simulation(scene);
+    const Eigen::Vector3d down = scene.gravity.normalized();
+    double low = INFINITY, high = -INFINITY;
+    for (const Eigen::Vector3d& x : simulation.particles().position) {
+        low = std::min(low, x.dot(down));
+        high = std::max(high, x.dot(down));
+    }
+    return high > low && std::isfinite(down.norm()) ? scene.material.density * scene.gravity.norm() * (high - low) : 0.0;
+}
+
+int indexOf(const Job& job, const std::string& name) {
+    for (size_t i = 0; i < job.parameters.size(); ++i)
+        if (job.parameters[i].name() == name) return static_cast<int>(i);
+    return -1;
+}
+
+bool isFixed(const Job& job, const std::string& name) {
+    return std::any_of(job.fixed.begin(), job.fixed.end(), [&](const FixedParameter& f) { return f.parameter.name == name; });
+}
+
+// A searched parameter of the base, restarted at the base fit within its own bounds.
+json warmStart(const ParameterSpec& p, double theta) {
+    json spec = searched(p.name(), theta, kWarmLogSpread);
+    spec["min"] = p.lower;
+    spec["max"] = p.upper;
+    return spec;
+}
+
+// The run's scene with the effect's model, or a reason it cannot hold it.
+std::string withEffect(Scene& scene, const std::string& effect, double eta) {
+    if (effect == "shear_thinning" || effect == "yield_stress") {
+        if (!std::holds_alternative<Newtonian>(scene.material.model))
+            return "the base model is not Newtonian";
+        if (effect == "shear_thinning") scene.material.model = PowerLaw{eta, 1.0};
+        else scene.material.model = HerschelBulkley{0.0, eta, 1.0};
+    }
+    return "";
+}
+
+// The base's parameters and the effect's as a job's "parameters", or a reason the job cannot take it.
+std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect, json& out) {
+    out = json::array();
+    const int eta = indexOf(job, "viscosity");
+    const bool materialLaw = effect == "shear_thinning" || effect == "yield_stress";
+    if (materialLaw && eta < 0) return "the job does not search the viscosity the law replaces";
+    for (size_t i = 0; i < job.parameters.size(); ++i)
+        if (!(materialLaw && int(i) == eta)) out.push_back(warmStart(job.parameters[i], theta[i]));
+    if (materialLaw) {
+        // K with a new parameter's spread: beside n or τ_y it means another thing. A Bingham
+        // liquid's apparent viscosity is K + τ_y/γ̇, so K lies below the base's η* (45 Pa·s for
+        // K = 10, τ_y = 60 Pa); above it the search found a plateau of near-Newtonian fits
+        // (K ≈ η*, τ_y a few Pa, E 0.03) and stayed there, E being 0.0008 at the truth.
+        const ParameterSpec& p = job.parameters[eta];
+        json consistency = searched("consistency", theta[eta], kNewLogSpread);
+        consistency["min"] = p.lower;
+        consistency["max"] = p.upper;
+        if (effect == "yield_stress") {
+            consistency = searched("consistency", theta[eta] / 3, 1.0);
+            consistency["min"] = std::max(p.lower, theta[eta] / 100);
+            consistency["max"] = theta[eta];
+        }
+        out.push_back(consistency);
+    }
+    if (effect == "shear_thinning") {
+        // Thinning only (n ≤ 1), so that n = 1 is the base: a fit against a reference from another
+        // grid otherwise bought a held-out gain from n above 1 in a Newtonian control.
+        json index = searched("flow_index", kStartFlowIndex, 0.3);
+        index["max"] = 1.0;
+        out.push_back(index);
+    } else if (effect == "yield_stress") {
+        // Within [1 %, 100 %] of the liquid's hydrostatic stress ρ g h₀, from a tenth of it. Below,
+        // a yield stress hardly changes the flow and E is flat over many decades of ln τ_y, where
+        // the search drifted (to 1.6 Pa against a Bingham column of τ_y = 60 Pa, ρ g h₀ = 618 Pa).
+        const ParameterDeclaration& d = *findParameterDeclaration("yield_stress");
+        json yieldStress = searched("yield_stress", d.searchInitial, kNewLogSpread);
+        if (const double stress = hydrostaticStress(job.scene); stress > 0) {
+            yieldStress = searched("yield_stress", 0.1 * stress, 1.0);
+            yieldStress["min"] = 0.01 * stress;
+            yieldStress["max"] = stress;
+        }
+        out.push_back(yieldStress);
+    } else if (effect == "wall_slip") {
+        if (indexOf(job, "slip_length") >= 0 || isFixed(job, "slip_length")) return "the job already sets the slip length";
+        if (job.scene.material.slipLength > 0) return "the scene already has a slip length";
+        const ParameterDeclaration& d = *findParameterDeclaration("slip_length");
+        out.push_back(searched("slip_length", d.searchInitial, kNewLogSpread));
+    } else if (effect == "side_walls") {
+        int channel = -1;
+        for (size_t s = 0; s < job.scene.solids.size(); ++s)
+            if (std::holds_alternative<ChannelSolid>(job.scene.solids[s])) channel = static_cast<int>(s);
+        if (channel < 0) return "the scene has no channel solid";
+        const std::string name = "solids[" + std::to_string(channel) + "].width";
+        if (indexOf(job, name) >= 0 || isFixed(job, name)) return "the job already sets the channel's width";
+        json width{{"name", name}};
+        out.push_back(width);  // its start and bounds: the scene's width, and a factor 2 either side
+    }
+    return "";
+}
+
+// The job of a model: the base job with the effect's scene and parameters in every run, limited to
+// `maxFrames[r]` compared frames in run r when given.
+Job modelJob(const Job& base, const std::string& effect, const json& parameters, const std::vector<int>& maxFrames) {
+    Job job = base;
+    std::vector<Job*> runs{&job};
+    for (Job& run : job.otherRuns) runs.push_back(&run);
+    const double eta = job.scene.material.viscosity;
+    for (size_t r = 0; r < runs.size(); ++r) {
+        Job& run = *runs[r];
+        if (!effect.empty()) {
+            withEffect(run.scene, effect, eta);
+            run.parameters.clear();
+            for (size_t i = 0; i < parameters.size(); ++i)
+                run.parameters.push_back(parseSearchedParameter(
+                    parameters[i], run.scene, run.file.string() + ": diagnosis " + effect + ": parameters[" +
+                                                 std::to_string(i) + "]"));
+            run.document["parameters"] = parameters;
+            run.document["_effect"] = effect;
+            // As parseJob has it: placements by generation need a single parameter.
+            if (run.parameters.size() > 1 && run.placementSchedule == PlacementSchedule::ByGeneration) {
+                run.placementSchedule = PlacementSchedule::EachEvaluation;
+                if (!run.document.contains("grid_placements")) run.gridPlacements = 1;
+            }
+        }
+        if (!maxFrames.empty()) {
+            run.maxFrames = maxFrames[r];
+            run.document["_max_frames"] = maxFrames[r];
+        }
+        // Every generation over the whole fitted part: an effect that shows late (a front that
+        // stops) is not in the coarse phase's first third, whose best point the full-fidelity phase
+        // then searches around (a hidden yield stress was fitted at 3 Pa for 60 that way).
+        run.fidelity.coarseGenerations = 0;
+    }
+    return job;
+}
+
+// Each run of `job` as a job of its own.
+std::vector<Job> runsOf(const Job& job) {
+    std::vector<Job> runs{job};
+    runs.front().otherRuns.clear();
+    runs.insert(runs.end(), job.otherRuns.begin(), job.otherRuns.end());
+    return runs;
+}
+
+struct RunScore {
+    double fitted = 0, heldOut = 0, whole = 0;
+    int fittedFrames = 0;
+    std::optional<double> trackError;
+    json series = json::array();
+};
+
+// E of the reference frames in `frames` (indices): Σ ω_f E_f of the silhouettes and the measured
+// track's weight × Σ(sim − measured)² / Σ measured² over them. (The silhouettes' area track, which
+// identify adds to E, is left out: it is one term over the whole clip.)
+double partE(const Job& run, const Observation& obs, const Evaluation& ev, const std::vector<size_t>& frames) {
+    double E = 0, squaredError = 0, squaredMeasured = 0;
+    for (size_t i : frames) {
+        if (!obs.masks[i].empty()) E += obs.reference.weights[i] * ev.frameE[i];
+        if (!obs.measured.empty() && std::isfinite(obs.measured[i]) && i < ev.trackSimulated.size()) {
+            squaredError += std::pow(ev.trackSimulated[i] - obs.measured[i], 2);
+            squaredMeasured += obs.measured[i] * obs.measured[i];
+        }
+    }
+    if (squaredMeasured > 0) E += run.measuredTrack->weight * squaredError / squaredMeasured;
+    return E;
+}
+
+// The compared reference frames of a run, in time order.
+std::vector<size_t> comparedFrames(const Observation& obs) {
+    std::vector<size_t> frames;
+    for (size_t i = 0; i < obs.simFrames.size(); ++i)
+        if (obs.simFrames[i] >= 0) frames.push_back(i);
+    std::stable_sort(frames.begin(), frames.end(), [&](size_t a, size_t b) { return obs.simFrames[a] < obs.simFrames[b]; });
+    return frames;
+}
+
+RunScore scoreRun(const Job& run, const Observation& obs, const std::vector<double>& theta, int fitCount) {
+    const Evaluation ev = evaluate(run, obs, theta, run.resolution);
+    const std::vector<size_t> frames = comparedFrames(obs);
+    const std::vector<size_t> fitted(frames.begin(), frames.begin() + fitCount), heldOut(frames.begin() + fitCount, frames.end());
+    RunScore score;
+    score.fitted = partE(run, obs, ev, fitted);
+    score.heldOut = partE(run, obs, ev, heldOut);
+    score.whole = partE(run, obs, ev, frames);
+    score.fittedFrames = fitCount;
+    score.trackError = ev.trackError;
+    for (size_t k = 0; k < frames.size(); ++k) {
+        const size_t i = frames[k];
+        json point{{"time_s", obs.reference.times[i]}, {"sim_frame", obs.simFrames[i]}, {"fitted", k < size_t(fitCount)}};
+        if (!obs.masks[i].empty()) point["frame_E"] = ev.frameE[i];
+        if (!obs.measured.empty() && std::isfinite(obs.measured[i])) {
+            point["measured"] = obs.measured[i];
+            point["simulated"] = ev.trackSimulated[i];
+        }
+        score.series.push_back(point);
+    }
+    return score;
+}
+
+// Fits a model to the fitted frames, then scores θ* on every frame of every run.
+ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting, const std::vector<Observation>& observations,
+                  const std::vector<int>& fitCounts, const fs::path& dir, const DiagnoseOptions& options, json& runSeries) {
+    IdentifyOptions identifyOptions = options.identify;
+    identifyOptions.writeFields = false;
+    const IdentificationResult result = identify(fitting, dir, identifyOptions);
+    ModelFit fit;
+    fit.model = model;
+    for (const ParameterSpec& p : full.parameters) fit.parameters.push_back(p.name());
+    fit.theta = result.theta;
+    fit.interval = result.interval;
+    fit.evaluations = result.evaluations;
+    fit.seconds = result.seconds;
+    const std::vector<Job> runs = runsOf(full);
+    int fittedFrames = 0;
+    runSeries = json::array();
+    for (size_t r = 0; r < runs.size(); ++r) {
+        const RunScore score = scoreRun(runs[r], observations[r], fit.theta, fitCounts[r]);
+        fit.fittedE += score.fitted;
+        fit.heldOutE += score.heldOut;
+        fit.wholeE += score.whole;
+        fittedFrames += score.fittedFrames;
+        if (r == 0) fit.trackError = score.trackError;
+        runSeries.push_back(score.series);
+    }
+    const double n = fittedFrames, k = double(fit.theta.size());
+    fit.bic = n * std::log(std::max(fit.fittedE, 1e-300) / n) + k * std::log(n);
+    return fit;
+}
+
+json toJson(const ModelFit& fit, const json& series) {
+    json parameters = json::object();
+    for (size_t i = 0; i < fit.parameters.size(); ++i)
+        parameters[fit.parameters[i]] = {{"value", fit.theta[i]}, {"interval", fit.interval[i]}};
+    json doc{{"model", fit.model},         {"parameters", parameters},   {"fitted_E", fit.fittedE},
+             {"held_out_E", fit.heldOutE}, {"whole_E", fit.wholeE},      {"bic", fit.bic},
+             {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"residual_over_time", series}};
+    if (fit.trackError) doc["track_error"] = *fit.trackError;
+    return doc;
+}
+
+}  // namespace
+
+const std::vector<Effect>& diagnosisEffects() { return kEffects; }
+
+Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptions& options) {
+    if (!(options.fitShare > 0 && options.fitShare < 1))
+        throw InputError("diagnose: the fitted share must lie between 0 and 1, got " + std::to_string(options.fitShare));
+    for (const std::string& effect : options.effects)
+        if (std::none_of(kEffects.begin(), kEffects.end(), [&](const Effect& e) { return effect == e.name; }))
+            throw InputError("diagnose: unknown effect \"" + effect + "\" (shear_thinning, yield_stress, wall_slip, side_walls)");
+    fs::create_directories(outDir);
+    Job job = jobIn;
+    prepareReference(job, outDir);
+    for (size_t k = 0; k < job.otherRuns.size(); ++k) prepareReference(job.otherRuns[k], outDir / ("run" + std::to_string(k + 1)));
+
+    // Each run's compared frames: the first fitShare of them are fitted, the rest held out.
+    std::vector<Observation> observations;
+    std::vector<int> fitCounts;
+    for (const Job& run : runsOf(job)) {
+        observations.push_back(loadObservation(run));
+        const int compared = static_cast<int>(comparedFrames(observations.back()).size());
+        const int fitted = std::max(kMinInformativeFrames, int(std::lround(options.fitShare * compared)));
+        if (compared - fitted < 2)
+            throw InputError(run.file.string() + ": diagnose: " + std::to_string(compared) +
+                             " compared frames, too few to fit " + std::to_string(fitted) +
+                             " and predict at least 2 more (a longer clip or track, or a smaller fitted share)");
+        fitCounts.push_back(fitted);
+    }
+
+    // The candidates the job can take, in the declared order.
+    std::vector<std::pair<std::string, std::string>> refused;  // effect, why
+    std::vector<const Effect*> candidates;
+    for (const Effect& effect : kEffects) {
+        const bool asked = options.effects.empty() ||
+                           std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
+        if (!asked) continue;
+        json parameters;
+        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, parameters);
+        if (why.empty()) {
+            Scene probe = job.scene;
+            why = withEffect(probe, effect.name, job.scene.material.viscosity);
+        }
+        if (why.empty()) candidates.push_back(&effect);
+        else if (!options.effects.empty()) throw InputError(job.file.string() + ": diagnose: " + effect.name + ": " + why);
+        else refused.emplace_back(effect.name, why);
+    }
+    const int fits = 1 + static_cast<int>(candidates.size());
+
+    Diagnosis diagnosis;
+    json baseSeries;
+    if (options.onFit) {
+        std::vector<std::string> names;
+        for (const ParameterSpec& p : job.parameters) names.push_back(p.name());
+        options.onFit("base", 0, fits, names);
+    }
+    diagnosis.base = fitModel("base", job, modelJob(job, "", {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
+                              options, baseSeries);
+    json candidatesDoc = json::array();
+    std::vector<json> candidateSeries;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+        const std::string name = candidates[c]->name;
+        json parameters;
+        effectParameters(job, diagnosis.base.theta, name, parameters);
+        if (options.onFit) {
+            std::vector<std::string> names;
+            for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());
+            options.onFit(name, static_cast<int>(c + 1), fits, names);
+        }
+        // The base fit's values in every run's scene, where the effect's model takes its K from.
+        Job base = job;
+        for (Job* run : [&] {
+                 std::vector<Job*> runs{&base};
+                 for (Job& other : base.otherRuns) runs.push_back(&other);
+                 return runs;
+             }())
+            for (size_t i = 0; i < run->parameters.size(); ++i)
+                setParameter(run->scene, run->parameters[i].parameter, diagnosis.base.theta[i]);
+        const Job full = modelJob(base, name, parameters, {});
+        json series;
+        diagnosis.candidates.push_back(fitModel(name, full, modelJob(base, name, parameters, fitCounts), observations,
+                                                fitCounts, outDir / "fits" / name, options, series));
+        candidateSeries.push_back(series);
+    }
+
+    const ModelFit& base = diagnosis.base;
+    for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
+        const ModelFit& fit = diagnosis.candidates[c];
+        const bool earns = fit.heldOutE < (1 - kHeldOutGain) * base.heldOutE && fit.bic < base.bic;
+        if (earns && (!diagnosis.chosen || fit.heldOutE < diagnosis.candidates[*diagnosis.chosen].heldOutE))
+            diagnosis.chosen = c;
+        json entry = toJson(fit, candidateSeries[c]);
+        entry["description"] = candidates[c]->description;
+        entry["source"] = candidates[c]->source;
+        entry["held_out_gain"] = base.heldOutE > 0 ? 1 - fit.heldOutE / base.heldOutE : 0.0;
+        entry["earns_its_parameters"] = earns;
+        candidatesDoc.push_back(entry);
+    }
+    json notTried = json::array();
+    for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
+    const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
+    json errors{{"E", {{"before", base.wholeE}, {"after", after.wholeE}}},
+                {"held_out_E", {{"before", base.heldOutE}, {"after", after.heldOutE}}}};
+    if (base.trackError && after.trackError)
+        errors["track_error"] = {{"before", *base.trackError}, {"after", *after.trackError}};
+    diagnosis.document = {
+        {"format", "viscoscope.diagnosis"},
+        {"version", 1},
+        {"job", job.file.string()},
+        {"chosen", diagnosis.chosen ? json(after.model) : json()},
+        {"conclusion", diagnosis.chosen ? "missing effect: " + after.model : std::string("no missing effect")},
+        {"criterion", "fitted on each run's first " + std::to_string(int(std::lround(100 * options.fitShare))) +
+                          " % of compared frames; an effect earns its parameters when its E over the held-out rest is "
+                          "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +
+                          " % of the base's and its BIC over the fitted frames is below the base's"},
+        {"fitted_frames", fitCounts},
+        {"base", toJson(base, baseSeries)},
+        {"candidates", candidatesDoc},
+        {"not_tried", notTried},
+        {"errors", errors}};
+    writeJsonAtomically(diagnosis.document, outDir / "diagnosis.json");
+    return diagnosis;
+}
+
+}  // namespace viscoscope::identify

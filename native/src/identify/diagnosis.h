@@ -1,0 +1,67 @@
+// Diagnosis: from the residual of the best fit to the physical effect the model lacks (DESIGN.md,
+// "Diagnosis: closing the loop"). The job's model (the base) and each candidate effect the scene can
+// hold are fitted to the first part of the reference (each its own identification) and scored on
+// all of it; a candidate is chosen only when it predicts the held-out rest better than the base by
+// a clear margin and pays for its parameters in the fitted part (BIC), else "no missing effect".
+#pragma once
+
+#include "identify/identification.h"
+#include "identify/job.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace viscoscope::identify {
+
+// The effects a diagnosis can add, each a model the engine simulates (sim/material_model.h, solids).
+struct Effect {
+    const char* name;         // as diagnosis.json and --effects name it
+    const char* description;  // what it adds, one line
+    const char* source;       // the law's source, one line
+};
+const std::vector<Effect>& diagnosisEffects();
+
+struct DiagnoseOptions {
+    IdentifyOptions identify;  // for every fit (its fields are not written)
+    // The share of each run's compared frames fitted; the later rest is predicted and scored.
+    double fitShare = 2.0 / 3;
+    std::vector<std::string> effects;  // the candidates; empty: every effect the scene can hold
+    // Before each fit: its model ("base" or an effect's name), its index, the number of fits and the
+    // parameters it searches.
+    std::function<void(const std::string& model, int index, int count, const std::vector<std::string>& parameters)> onFit;
+};
+
+// One fitted model, scored over the whole reference.
+struct ModelFit {
+    std::string model;  // "base" or an effect's name
+    std::vector<std::string> parameters;
+    std::vector<double> theta;
+    std::vector<std::array<double, 2>> interval;
+    double fittedE = 0;    // the fitted frames' E, every run
+    double heldOutE = 0;   // the held-out frames' E: the prediction's error
+    double wholeE = 0;     // all frames
+    double bic = 0;        // N ln(fittedE / N) + k ln N over the N fitted frames
+    std::optional<double> trackError;  // relative L2 of the measured track over all frames (first run)
+    long evaluations = 0;
+    double seconds = 0;
+};
+
+struct Diagnosis {
+    ModelFit base;
+    std::vector<ModelFit> candidates;
+    std::optional<size_t> chosen;  // into candidates; none: no missing effect
+    nlohmann::json document;       // what diagnosis.json holds
+};
+
+// Runs (or resumes: each fit keeps its own checkpoint under OUT/fits/<model>) the diagnosis and writes
+// OUT/diagnosis.json. Throws InputError when the reference has too few frames to hold any out, or an
+// asked-for effect is unknown or one the scene cannot hold; Cancelled on a cancel request.
+Diagnosis diagnose(const Job& job, const std::filesystem::path& outDir, const DiagnoseOptions& options = {});
+
+}  // namespace viscoscope::identify

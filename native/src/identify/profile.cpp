@@ -1,0 +1,135 @@
+// E's profile near its best: the parabola fit, the bracketed vertex, the mean over placements.
+#include "identify/profile.h"
+
+#include <Eigen/Core>
+#include <Eigen/QR>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+namespace viscoscope::identify {
+
+using json = nlohmann::json;
+
+std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
+                                     double range, bool inverse, json& info) {
+    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    const auto theta = [&](double value) { return inverse ? 1 / value : std::exp(value); };
+    std::vector<std::pair<double, double>> near;
+    for (const auto& p : points)
+        if (std::abs(std::log(p.first / thetaBest)) <= range && std::isfinite(p.second))
+            near.emplace_back(u(p.first) - u(thetaBest), p.second);
+    info["points"] = near.size();
+    info["variable"] = inverse ? "1/θ" : "ln θ";
+    if (near.size() < 5) return std::nullopt;
+    Eigen::MatrixXd A(near.size(), 3);
+    Eigen::VectorXd y(near.size());
+    double lowest = INFINITY, highest = -INFINITY;
+    for (size_t i = 0; i < near.size(); ++i) {
+        A.row(i) << 1, near[i].first, near[i].first * near[i].first;
+        y[i] = near[i].second;
+        lowest = std::min(lowest, near[i].first);
+        highest = std::max(highest, near[i].first);
+    }
+    const Eigen::Vector3d coef = A.colPivHouseholderQr().solve(y);
+    const double squaredResiduals = (A * coef - y).squaredNorm();
+    const double rSquared = 1 - squaredResiduals / (y.array() - y.mean()).square().sum();
+    // E's jitter: the residuals' spread over the n − 3 degrees of freedom the fit leaves. Their RMS
+    // over n reads it √((n − 3)/n) low, 0.63× with the five points a short run often has.
+    const double jitter = std::sqrt(squaredResiduals / (near.size() - 3));
+    info["coefficients"] = {coef[0], coef[1], coef[2]};
+    info["jitter"] = jitter;
+    info["r_squared"] = rSquared;
+    if (!(coef[2] > 0)) return std::nullopt;
+    const double u0 = -coef[1] / (2 * coef[2]);
+    const double eMin = coef[0] - coef[1] * coef[1] / (4 * coef[2]);
+    const double dE = std::max(2 * jitter, 0.01 * std::abs(eMin));
+    const double half = std::sqrt(dE / coef[2]);
+    const double uMin = u(thetaBest) + u0;
+    info["delta_E"] = dE;
+    if (inverse && uMin <= 0) return std::nullopt;  // a vertex beyond 1/θ = 0 has no θ
+    ProfileFit fit;
+    fit.vertex = theta(uMin);
+    fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
+    fit.curvature = coef[2];
+    const double lo = uMin - half, hi = uMin + half;
+    // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
+    fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
+                           : std::array<double, 2>{theta(lo), theta(hi)};
+    info["theta_min"] = fit.vertex;
+    return fit;
+}
+
+std::optional<double> bracketedVertex(const std::vector<std::pair<double, double>>& points, bool inverse) {
+    const std::pair<double, double>* best = nullptr;
+    for (const auto& p : points)
+        if (std::isfinite(p.second) && (!best || p.second < best->second)) best = &p;
+    if (!best) return std::nullopt;
+    const std::pair<double, double>*below = nullptr, *above = nullptr;
+    for (const auto& p : points) {
+        if (!std::isfinite(p.second)) continue;
+        if (p.first < best->first && (!below || p.first > below->first)) below = &p;
+        if (p.first > best->first && (!above || p.first < above->first)) above = &p;
+    }
+    if (!below || !above) return std::nullopt;
+    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    // Relative to the lowest point, a = (u, E) below and c above in θ; both E ≥ its E, so the
+    // parabola is convex (or flat: then the midpoint) and its vertex lies between them.
+    const double ua = u(below->first) - u(best->first), uc = u(above->first) - u(best->first);
+    const double ea = below->second - best->second, ec = above->second - best->second;
+    const double denominator = ua * ec - uc * ea;
+    const double u0 = denominator == 0 ? (ua + uc) / 2 : (ua * ua * ec - uc * uc * ea) / (2 * denominator);
+    const double vertex = u(best->first) + u0;
+    return inverse ? 1 / vertex : std::exp(vertex);
+}
+
+std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<PlacedPoint>& points, bool inverse) {
+    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    struct Node {
+        double theta = 0, sumE = 0;
+        int count = 0;
+        double E() const { return sumE / count; }
+    };
+    // Each placement's line: u → its point (repeated θ averaged), placements in first-listed order.
+    std::vector<std::pair<double, std::map<double, Node>>> lines;
+    for (const PlacedPoint& p : points) {
+        if (!std::isfinite(p.E)) continue;
+        auto line = std::find_if(lines.begin(), lines.end(), [&](const auto& l) { return l.first == p.gridShift; });
+        if (line == lines.end()) line = lines.insert(lines.end(), {p.gridShift, {}});
+        Node& node = line->second[u(p.theta)];
+        node.theta = p.theta;
+        node.sumE += p.E;
+        ++node.count;
+    }
+    std::vector<std::pair<double, double>> profile;
+    if (lines.empty()) return profile;
+    double lo = -INFINITY, hi = INFINITY;
+    for (const auto& [shift, line] : lines) {
+        lo = std::max(lo, line.begin()->first);
+        hi = std::min(hi, line.rbegin()->first);
+    }
+    const auto at = [](const std::map<double, Node>& line, double x) {
+        auto above = line.lower_bound(x);
+        if (above->first == x) return above->second.E();
+        const auto below = std::prev(above);
+        const double w = (x - below->first) / (above->first - below->first);
+        return (1 - w) * below->second.E() + w * above->second.E();
+    };
+    std::map<double, double> nodes;  // u → θ of every point within the common span
+    for (const auto& [shift, line] : lines)
+        for (const auto& [x, node] : line)
+            if (x >= lo && x <= hi) nodes.emplace(x, node.theta);
+    for (const auto& [x, theta] : nodes) {
+        double sum = 0;
+        for (const auto& [shift, line] : lines) sum += at(line, x);
+        profile.emplace_back(theta, sum / lines.size());
+    }
+    if (lines.size() > 1 && !profile.empty()) return profile;
+    profile.clear();
+    for (const auto& [shift, line] : lines)
+        for (const auto& [x, node] : line) profile.emplace_back(node.theta, node.E());
+    return profile;
+}
+
+}  // namespace viscoscope::identify

@@ -1,0 +1,56 @@
+// E as a function of one parameter near its best: the profile fit that gives the interval, the
+// parabolic proposal, and E's mean over grid placements.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <optional>
+#include <utility>
+#include <vector>
+
+namespace viscoscope::identify {
+
+// The profile of E around the best full-fidelity evaluation θ_b of a single parameter: a
+// least-squares parabola E ≈ a + b u + c u² over the points (θ, E) with |ln θ − ln θ_b| ≤ `range`
+// (`inverse`: u = 1/θ, else ln θ), at least five of them; `info` receives the fit's figures.
+// For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
+// the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
+// its valley is steeper below the truth than above, and a parabola there puts the vertex high
+// (measured: +2.3 % and +10.1 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
+// parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
+// 2 × the jitter in E (the residuals' standard deviation, √(Σr²/(n − 3))), at least 1 % of E_min.
+struct ProfileFit {
+    double vertex = 0;                 // θ at the parabola's minimum
+    std::array<double, 2> interval{};  // θ
+    bool vertexAmongPoints = false;    // within the span of the fitted points (no extrapolation)
+    double curvature = 0;              // c of E ≈ a + b u + c u²
+};
+std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
+                                     double range, bool inverse, nlohmann::json& info);
+// The vertex of the parabola through the lowest point (θ, E) and its nearest neighbours in θ on
+// either side (u = 1/θ when `inverse`, else ln θ, as for fitProfile): one step of successive
+// parabolic interpolation, the proposal a one-parameter search injects (see identification.cpp).
+// None when the lowest point has no neighbour on one side, or E is not finite there.
+std::optional<double> bracketedVertex(const std::vector<std::pair<double, double>>& points, bool inverse);
+
+// The time budget's prediction of a full-fidelity evaluation before any has run: the mean, over
+// the coarse evaluations within kCoarseToFineShift (ln θ, every coordinate) of the best coarse one,
+// where the full-fidelity phase restarts, of their seconds scaled by (r/r_c)⁴ (cells × time steps)
+// and by how much longer the full clip takes: its frames plus the remaining ones at the rate of
+// the coarse clip's last third. `evaluated` holds the checkpoint's evaluation records ("fidelity",
+// "theta", "E", "seconds", "frame_s"). 0 without coarse evaluations.
+
+// point's θ where all placements' lines reach, the profile holds the mean of their E there. The
+// lines, not a fitted curve, because E is often a V near its minimum (on the sample cup at η = 10 it
+// was 0.034 at the truth and 0.045–0.058 at ±10 % on both placements) and a parabola misplaces its
+// tip. Points of a single placement are returned as they are; without a common span, every
+// placement's points as they are (a run cut short by its time budget after one generation on each
+// placement, their samples apart, would otherwise lose the better half: η = 1 on the sample cup, its
+// first placement's points all below 0.71, the other's lowest E at 1.023).
+struct PlacedPoint {
+    double theta = 0, E = 0, gridShift = 0;
+};
+std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<PlacedPoint>& points, bool inverse);
+
+}  // namespace viscoscope::identify

@@ -1,0 +1,220 @@
+// The identification's own state and the pieces of the loop that read it, private to the stage:
+// the evaluations and generations so far (typed here; the checkpoint and result.json hold them as
+// JSON), the checkpoint (search_state.cpp), the time budget (time_budget.cpp), the best
+// evaluation's fields (fields_store.cpp), the alignment check (alignment_check.cpp) and the results
+// (results.cpp). identification.cpp runs the loop over them.
+#pragma once
+
+#include "identify/identify.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace viscoscope::identify {
+
+using Clock = std::chrono::steady_clock;
+
+enum class Fidelity { Coarse, Full };
+const char* fidelityName(Fidelity fidelity);  // "coarse", "full": the records' "fidelity"
+
+// The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
+// drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
+// 3–4 cells wide, and the best 32³ evaluations sat 25–35 % above the truth in identify_bench and
+// identification_table runs at 48³. On the job's grid, a third of the clip weighs the flow's phases
+// differently from all of it (truth 10 against a 64³ reference: frames 1–19 favour 9.2–9.8, frames
+// 21–39 favour 7.7), so the fine phase searches a log-space spread of ln 1.4 around the coarse best.
+constexpr double kCoarseToFineShift = 0.35;
+
+// The grids and clips of the two fidelities (see the fidelity policy in identification.cpp).
+struct FidelityPlan {
+    int coarseResolution = 0, fullResolution = 0;
+    int coarseFrames = 0, fullFrames = 0;  // the last simulation frame each compares
+    int resolution(Fidelity f) const { return f == Fidelity::Coarse ? coarseResolution : fullResolution; }
+    int frames(Fidelity f) const { return f == Fidelity::Coarse ? coarseFrames : fullFrames; }
+};
+
+// One finished evaluation of the search: result.json's and the checkpoint's "evaluated" records.
+struct EvaluationRecord {
+    Evaluation evaluation;
+    int generation = 0;  // from 1
+    Fidelity fidelity = Fidelity::Full;
+    int frames = 0;
+    std::vector<double> x;  // the optimizer's point, ln θ before clipping into the bounds
+    std::string origin;     // "sample", "scan", "restart" or "parabola"
+    double gridShift = 0;   // cells along x and y
+    std::string error;      // why the simulation failed (E = ∞)
+    std::optional<int> rank;
+    const std::vector<double>& theta() const { return evaluation.theta; }
+    double E() const { return evaluation.E; }
+    bool succeeded() const { return std::isfinite(evaluation.E); }
+};
+nlohmann::json toJson(const EvaluationRecord& record);
+EvaluationRecord evaluationRecordFromJson(const nlohmann::json& doc);
+
+struct BestPoint {
+    std::vector<double> theta;
+    double E = INFINITY;
+    double gridShift = 0;  // the placement its fields come from
+};
+
+// One finished generation: result.json's "history".
+struct GenerationRecord {
+    int generation = 0;
+    Fidelity fidelity = Fidelity::Full;
+    int resolution = 0;
+    double gridShift = 0;
+    double generationBestE = INFINITY;
+    std::vector<double> generationBestTheta;
+    std::vector<double> bestTheta;  // the best so far at this fidelity (empty: none yet)
+    double bestE = INFINITY;
+    std::vector<double> meanTheta;
+    double sigma = 0;
+    std::vector<double> logStd;
+    long evaluations = 0;
+    double seconds = 0;
+    std::optional<double> predictedFineGenerationSeconds;  // at the switch to full fidelity
+    std::string warning;
+};
+nlohmann::json toJson(const GenerationRecord& record);
+GenerationRecord generationRecordFromJson(const nlohmann::json& doc);
+
+// The two evaluations of a finished alignment check: θ* and kAlignmentStep·θ* on the moved grid.
+struct AlignmentScores {
+    std::array<double, 2> theta{};
+    std::array<double, 2> E{INFINITY, INFINITY};  // ∞ where the simulation failed
+    std::vector<std::string> errors;
+};
+
+// Everything a resume needs.
+struct SearchState {
+    explicit SearchState(CmaEs start) : es(std::move(start)) {}
+    CmaEs es;
+    int coarseEnd = 0;  // the first full-fidelity generation
+    std::vector<EvaluationRecord> evaluated;
+    std::vector<GenerationRecord> generations;
+    double elapsedBefore = 0;  // wall seconds of earlier sessions
+    std::optional<StopReason> stop;
+    std::optional<AlignmentScores> alignment;
+    int resumedFrom = 0;  // the generations a checkpoint held
+};
+
+// OUT/checkpoint.json: the state after every generation, sealed (scene/digest.h) and tied to the
+// job by a fingerprint of everything that changes E.
+class Checkpoint {
+public:
+    Checkpoint(const Job& job, const std::filesystem::path& outDir);
+    const std::string& fingerprint() const { return fingerprint_; }
+    // The saved state, or none without a checkpoint. Throws InputError for one that is unreadable,
+    // of another version, damaged, or of another job. A finished run goes on when this job allows
+    // more generations or has a time budget (its stop is decided again).
+    std::optional<SearchState> load(const Job& job) const;
+    void save(const SearchState& state, double elapsed) const;
+
+private:
+    std::filesystem::path file_;
+    std::string fingerprint_;
+};
+
+// Full-fidelity generations take turns on the job's grid placements (Job::placementSchedule).
+bool placementsByGeneration(const Job& job);
+// (θ, E) of the finished full-fidelity evaluations of a one-parameter search; with placements by
+// generation, E's mean over them (placementMeanProfile).
+std::vector<std::pair<double, double>> fullFidelityProfile(const Job& job, const std::vector<EvaluationRecord>& evaluated);
+// The best θ at a fidelity: the lowest evaluation, or at full fidelity with placements by
+// generation the lowest point of E's mean over them; none before a finite E.
+std::optional<BestPoint> bestAt(const Job& job, const std::vector<EvaluationRecord>& evaluated, Fidelity fidelity);
+
+// The time budget's prediction of a full-fidelity evaluation before any has run: the mean, over
+// the coarse evaluations within kCoarseToFineShift (ln θ, every coordinate) of the best coarse one,
+// where the full-fidelity phase restarts, of their seconds scaled by (r/r_c)⁴ (cells × time steps)
+// and by how much longer the full clip takes: its frames plus the remaining ones at the rate of
+// the coarse clip's last third. 0 without coarse evaluations.
+double predictedFullEvaluationSeconds(const std::vector<EvaluationRecord>& evaluated, const FidelityPlan& plan);
+
+// Wall time against the job's time_budget_s, and what the rest of the search is predicted to take.
+class TimeBudget {
+public:
+    TimeBudget(const Job& job, const SearchState& state, const FidelityPlan& plan, int concurrency,
+               bool alignmentPlanned);
+    double elapsed() const;  // over every session
+    bool fits(double seconds) const;  // always without a budget
+    void addGeneration(Fidelity fidelity, double seconds);
+    double coarseGenerationSeconds() const;  // the mean so far
+    // The mean so far, else ⌈λ / concurrency⌉ rounds of predictedFullEvaluationSeconds.
+    double fineGenerationSeconds() const;
+    // The alignment check's two evaluations, with the margin the minimum generations get.
+    double alignmentSeconds() const;
+    // The coarse phase must end: another coarse generation would pass its share of the budget or
+    // the time the minimum full-fidelity generations and the alignment check need.
+    bool coarsePhaseOver() const;
+    // The last full-fidelity generation has run: another would end past the budget.
+    bool fullPhaseOver() const;
+    // Seconds of the search left after `done` generations (of which coarseEnd coarse).
+    double remaining(int done, bool stopped) const;
+
+private:
+    const Job& job_;
+    const SearchState& state_;
+    FidelityPlan plan_;
+    int concurrency_;
+    bool alignmentPlanned_;
+    Clock::time_point sessionStart_;
+    std::vector<double> coarseSeconds_, fineSeconds_;
+};
+// "%d" of whole seconds, for messages.
+std::string wholeSeconds(double seconds);
+
+// OUT/fields: the best full-fidelity evaluation's hidden fields, every frame as .vdb, with
+// OUT/fields/evaluation.json saying whose they are. Full-fidelity evaluations write theirs into
+// OUT/fields.partial/<k>, and the generation's winner replaces OUT/fields.
+class FieldsStore {
+public:
+    FieldsStore(const std::filesystem::path& outDir, std::string fingerprint, int frames);
+    std::filesystem::path staged(size_t k) const;
+    void clearStaging() const;  // also what a killed generation left
+    void promote(size_t k, const Evaluation& evaluation, double gridShift) const;
+    // result.json's "fields" for θ*: its evaluation's own, or θ* simulated again when OUT/fields
+    // does not hold it.
+    nlohmann::json keep(const Job& job, const Observation& observation, const BestPoint& best, int resolution) const;
+
+private:
+    std::filesystem::path outDir_;
+    std::string fingerprint_;
+    int frames_;
+};
+
+// The alignment check of a one-parameter search (see alignment_check.cpp): θ* scored again on a
+// grid moved sideways, the minimum there, and how far the interval widens.
+struct AlignmentOutcome {
+    nlohmann::json entry;                // the parameter's "alignment_check"
+    std::optional<double> spread;        // |ln(θ_s/θ*)|, infinite when the moved minimum is
+    std::optional<std::string> warning;  // skipped for the budget
+    double seconds = 0;                  // simulated in this session
+};
+// Runs the check's two evaluations unless `state` holds them for θ* (then takes them from there),
+// storing them in `state` and calling `saved` after. Without a profile, or when they do not fit the
+// budget, it is skipped and says why.
+AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
+                                SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
+                                const TimeBudget& budget, const std::function<void()>& saved);
+
+// A doubt is a reason to think θ* wrong, one line each: result.json's "doubts", also sent as warnings.
+std::vector<std::string> doubtsBeforeSearch(const Observation& observation);
+std::vector<std::string> doubtsAfterSearch(const Job& job, const LogSearchSpace& bounds,
+                                           const std::vector<std::array<double, 2>>& intervals,
+                                           const std::vector<EvaluationRecord>& evaluated);
+// result.json's "timings": the wall time and each fidelity's evaluations, their seconds and parts.
+nlohmann::json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSeconds, double alignmentSeconds);
+// OUT/evaluations.csv: every evaluation, for plotting.
+void writeEvaluationsCsv(const Job& job, const std::vector<EvaluationRecord>& evaluated,
+                         const std::filesystem::path& file);
+
+}  // namespace viscoscope::identify
