@@ -23,7 +23,7 @@ def series_lines(ax, series, label, style):
     if any("measured" in p for p in series):
         points = [p for p in series if "measured" in p]
         ax.plot([p["time_s"] for p in points], [p["simulated"] - p["measured"] for p in points], style, label=label)
-        ax.set_ylabel("simulated − measured")
+        ax.set_ylabel("simulated − measured (m)")
     else:
         ax.plot(times, [p.get("frame_E", 0.0) for p in series], style, label=label)
         ax.set_ylabel("silhouette E per frame")
