@@ -15,6 +15,11 @@ power-law fit K = 9.712 Pa·sⁿ, n = 0.979; see that folder's README).
 4. `identify_landscape_bench` at the viscometer's readings and around η*: E and the front's error,
    on the job's grid and moved half a cell.
 
+With `--diagnose` the same front goes to `viscoscope diagnose` instead: η searched as the base, a
+channel as wide as the domain (`--max-width`) whose width the side-walls candidate may search, and
+every candidate effect; it prints the conclusion, each model's parameters and E over the fitted and
+the held-out frames, and the front's error before and after.
+
 With `--unknown channel_width` the viscosity is instead fixed at the viscometer's (the mean of its
 readings, half their spread as the uncertainty: the job's "fixed"), and the width of the channel,
 side walls of a "channel" solid inside a domain `--max-width` wide, is what the front identifies;
@@ -22,6 +27,7 @@ with `--unknown both` the front alone identifies the two at once.
 
     /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
     /usr/bin/python3 tests/bench/measured_dambreak.py --unknown channel_width [--max-width 0.3]
+    /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose [--resolution 60] [--generations 6]
 """
 import argparse
 import json
@@ -46,7 +52,10 @@ def main():
     parser.add_argument("--work", help="folder for the scene, job and results (default: a temporary one)")
     parser.add_argument("--unknown", choices=("viscosity", "channel_width", "both"), default="viscosity")
     parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
+    parser.add_argument("--diagnose", action="store_true", help="run viscoscope diagnose on the front")
     args = parser.parse_args()
+    if args.diagnose:
+        return diagnose(args)
     if args.unknown != "viscosity":
         return identify_channel_width(args)
     data = pathlib.Path(args.data).resolve()
@@ -96,21 +105,65 @@ def main():
     print(landscape.stdout, end="")
 
 
+def channel_scene(args, work, width):
+    """DIR/scene.json: the lock in a channel `width` wide inside a domain --max-width wide plus two
+    cells, so that the widest walls searched stay inside it; the lock's length and depth."""
+    lock, depth, length = 0.2, 0.0443, 0.55
+    dx = length / args.resolution
+    half = args.max_width / 2 + 2 * dx
+    scene = {"format": "viscoscope.scene", "version": 1,
+             "domain": {"min": [0, -half, 0], "max": [length, half, 0.055], "resolution": args.resolution},
+             "solids": [{"type": "channel", "center_y": 0, "width": width}],
+             "liquids": [{"type": "box", "min": [0, -half, 0], "max": [lock, half, depth]}],
+             "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
+             "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
+    (work / "scene.json").write_text(json.dumps(scene, indent=1))
+    return lock
+
+
+def diagnose(args):
+    """The effect the Newtonian model of the dam break lacks, from the filmed front alone."""
+    data = pathlib.Path(args.data).resolve()
+    if not data.is_file():
+        sys.exit(f"measured data not found: {data}")
+    work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_diagnose_"))
+    work.mkdir(parents=True, exist_ok=True)
+    lock = channel_scene(args, work, args.max_width)
+    job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
+           "track": {"csv": str(data), "column": "front_m", "observable": "front",
+                     "origin": [lock, 0, 0], "direction": [1, 0, 0], "band": 0.0065},
+           "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.01, "max": 1000}],
+           "max_generations": args.generations, "seed": 3}
+    (work / "job.json").write_text(json.dumps(job, indent=1))
+    started = time.monotonic()
+    run = subprocess.run([args.engine, "diagnose", work / "job.json", "--out", work / "diagnose", "--progress",
+                          "none"], capture_output=True, text=True)
+    wall = time.monotonic() - started
+    if run.returncode != 0:
+        sys.exit(f"diagnose failed (exit {run.returncode}): {run.stderr.strip()}")
+    d = json.loads((work / "diagnose/diagnosis.json").read_text())
+    print(f"dam break, {args.resolution} cells along the channel, {args.generations} generations per fit, "
+          f"fitted frames {d['fitted_frames']}, {wall:.0f} s: {d['conclusion']}")
+    for model in [d["base"]] + d["candidates"]:
+        values = ", ".join(f"{name} = {p['value']:.4g} [{p['interval'][0]:.4g}, {p['interval'][1]:.4g}]"
+                           for name, p in model["parameters"].items())
+        print(f"  {model['model']}: {values}; E fitted {model['fitted_E']:.4g}, held out {model['held_out_E']:.4g}, "
+              f"BIC {model['bic']:.1f}, front error {100 * model.get('track_error', float('nan')):.2f} %, "
+              f"{model['evaluations']} evaluations, {model['seconds']:.0f} s")
+    for tried in d["not_tried"]:
+        print(f"  not tried: {tried['effect']}: {tried['why']}")
+    errors = d["errors"]
+    print(f"front error before {100 * errors['track_error']['before']:.2f} %, after "
+          f"{100 * errors['track_error']['after']:.2f} %; held-out E {errors['held_out_E']['before']:.4g} -> "
+          f"{errors['held_out_E']['after']:.4g}")
+
+
 def identify_channel_width(args):
     """The channel's width from the filmed front, with η held at the viscometer's or searched too."""
     data = pathlib.Path(args.data).resolve()
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_width_"))
     work.mkdir(parents=True, exist_ok=True)
-    lock, depth, length = 0.2, 0.0443, 0.55
-    dx = length / args.resolution
-    half = args.max_width / 2 + 2 * dx  # the widest walls searched stay inside the domain
-    scene = {"format": "viscoscope.scene", "version": 1,
-             "domain": {"min": [0, -half, 0], "max": [length, half, 0.055], "resolution": args.resolution},
-             "solids": [{"type": "channel", "center_y": 0, "width": 0.1}],
-             "liquids": [{"type": "box", "min": [0, -half, 0], "max": [lock, half, depth]}],
-             "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
-             "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
-    (work / "scene.json").write_text(json.dumps(scene, indent=1))
+    lock = channel_scene(args, work, 0.1)
     eta, uncertainty = sum(VISCOMETER) / 2, (VISCOMETER[1] - VISCOMETER[0]) / 2
     job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
            "track": {"csv": str(data), "column": "front_m", "observable": "front",

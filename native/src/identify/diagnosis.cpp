@@ -12,7 +12,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <set>
 
 namespace viscoscope::identify {
 
@@ -48,6 +47,7 @@ json searched(const std::string& name, double initial, double logSpread) {
 // ρ g h₀, h₀ the height the liquid spans at the start (along gravity); 0 without liquid at the
 // start (emitters) or gravity.
 double hydrostaticStress(const Scene& scene) {
+    if (scene.gravity.norm() == 0) return 0.0;
     const sim::Simulation simulation(scene);
     const Eigen::Vector3d down = scene.gravity.normalized();
     double low = INFINITY, high = -INFINITY;
@@ -55,7 +55,7 @@ double hydrostaticStress(const Scene& scene) {
         low = std::min(low, x.dot(down));
         high = std::max(high, x.dot(down));
     }
-    return high > low && std::isfinite(down.norm()) ? scene.material.density * scene.gravity.norm() * (high - low) : 0.0;
+    return high > low ? scene.material.density * scene.gravity.norm() * (high - low) : 0.0;
 }
 
 int indexOf(const Job& job, const std::string& name) {
@@ -97,30 +97,26 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         if (!(materialLaw && int(i) == eta)) out.push_back(warmStart(job.parameters[i], theta[i]));
     if (materialLaw) {
         // K with a new parameter's spread: beside n or τ_y it means another thing. A Bingham
-        // liquid's apparent viscosity is K + τ_y/γ̇, so K lies below the base's η* (45 Pa·s for
-        // K = 10, τ_y = 60 Pa); above it the search found a plateau of near-Newtonian fits
-        // (K ≈ η*, τ_y a few Pa, E 0.03) and stayed there, E being 0.0008 at the truth.
+        // liquid's apparent viscosity is K + τ_y/γ̇, so its K lies within [η*/100, η*], from η*/3:
+        // above η* lies a plateau of near-Newtonian fits (K ≈ η*, τ_y a few Pa) that the search
+        // stayed on (tests/bench/FINDINGS.md, "Diagnose on synthetic fronts").
         const ParameterSpec& p = job.parameters[eta];
-        json consistency = searched("consistency", theta[eta], kNewLogSpread);
-        consistency["min"] = p.lower;
-        consistency["max"] = p.upper;
-        if (effect == "yield_stress") {
-            consistency = searched("consistency", theta[eta] / 3, 1.0);
-            consistency["min"] = std::max(p.lower, theta[eta] / 100);
-            consistency["max"] = theta[eta];
-        }
+        const bool bingham = effect == "yield_stress";
+        json consistency = searched("consistency", bingham ? theta[eta] / 3 : theta[eta], bingham ? 1.0 : kNewLogSpread);
+        consistency["min"] = bingham ? std::max(p.lower, theta[eta] / 100) : p.lower;
+        consistency["max"] = bingham ? theta[eta] : p.upper;
         out.push_back(consistency);
     }
     if (effect == "shear_thinning") {
-        // Thinning only (n ≤ 1), so that n = 1 is the base: a fit against a reference from another
-        // grid otherwise bought a held-out gain from n above 1 in a Newtonian control.
+        // Thinning only (n ≤ 1), so that n = 1 is the base: a free n absorbed the difference of the
+        // reference's grid in a Newtonian control and predicted it better (FINDINGS, as above).
         json index = searched("flow_index", kStartFlowIndex, 0.3);
         index["max"] = 1.0;
         out.push_back(index);
     } else if (effect == "yield_stress") {
         // Within [1 %, 100 %] of the liquid's hydrostatic stress ρ g h₀, from a tenth of it. Below,
         // a yield stress hardly changes the flow and E is flat over many decades of ln τ_y, where
-        // the search drifted (to 1.6 Pa against a Bingham column of τ_y = 60 Pa, ρ g h₀ = 618 Pa).
+        // the search drifted (FINDINGS, as above).
         const ParameterDeclaration& d = *findParameterDeclaration("yield_stress");
         json yieldStress = searched("yield_stress", d.searchInitial, kNewLogSpread);
         if (const double stress = hydrostaticStress(job.scene); stress > 0) {
@@ -141,8 +137,17 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         if (channel < 0) return "the scene has no channel solid";
         const std::string name = "solids[" + std::to_string(channel) + "].width";
         if (indexOf(job, name) >= 0 || isFixed(job, name)) return "the job already sets the channel's width";
-        json width{{"name", name}};
-        out.push_back(width);  // its start and bounds: the scene's width, and a factor 2 either side
+        // From the scene's width, anywhere between 4 cells of the job's grid and the domain's
+        // extent across: nobody measured it, so a factor 2 around a guess is not the bound.
+        const Scene& s = job.scene;
+        const double across = s.domain.max.y() - s.domain.min.y();
+        const double narrowest = std::min(across, 4 * (s.domain.max - s.domain.min).maxCoeff() / job.resolution);
+        if (across < 2 * narrowest) return "the domain is under 8 cells across, too narrow to search the channel's width";
+        const double now = std::get<ChannelSolid>(s.solids[channel]).width;
+        json width = searched(name, std::clamp(now, narrowest, across), kWarmLogSpread);
+        width["min"] = narrowest;
+        width["max"] = across;
+        out.push_back(width);
     }
     return "";
 }
@@ -177,7 +182,7 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
         }
         // Every generation over the whole fitted part: an effect that shows late (a front that
         // stops) is not in the coarse phase's first third, whose best point the full-fidelity phase
-        // then searches around (a hidden yield stress was fitted at 3 Pa for 60 that way).
+        // then searches around (FINDINGS, "Diagnose on synthetic fronts").
         run.fidelity.coarseGenerations = 0;
     }
     return job;
