@@ -41,6 +41,27 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 VISCOMETER = (9.876, 10.32)  # Pa·s, the lowest and highest apparent viscosity read
 
 
+def front_job(args, data, lock, origin_y, parameters):
+    """A job whose reference is the measured front alone, along the channel from the gate."""
+    return {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
+            "track": {"csv": str(data), "column": "front_m", "observable": "front",
+                      "origin": [lock, origin_y, 0], "direction": [1, 0, 0], "band": 0.0065},
+            "parameters": parameters, "max_generations": args.generations, "seed": 3}
+
+
+def run_engine(args, command, work, out, *options):
+    """Runs `viscoscope COMMAND WORK/job.json --out WORK/OUT`; its wall seconds, or exits with its error."""
+    started = time.monotonic()
+    run = subprocess.run([args.engine, command, work / "job.json", "--out", work / out, "--progress", "none",
+                          *options], capture_output=True, text=True)
+    if run.returncode != 0:
+        sys.exit(f"{command} failed (exit {run.returncode}): {run.stderr.strip()}")
+    return time.monotonic() - started
+
+
+VISCOSITY_SEARCHED = {"name": "viscosity", "initial": 5, "spread": 10, "min": 0.01, "max": 1000}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=str(ROOT.parent / "shared/data/measured/dambreak_syrup_validation.csv"))
@@ -72,19 +93,9 @@ def main():
              "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
              "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
     (work / "scene.json").write_text(json.dumps(scene, indent=1))
-    job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
-           "track": {"csv": str(data), "column": "front_m", "observable": "front",
-                     "origin": [lock, width / 2, 0], "direction": [1, 0, 0], "band": 0.0065},
-           "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.01, "max": 1000}],
-           "max_generations": args.generations, "seed": 3}
+    job = front_job(args, data, lock, width / 2, [VISCOSITY_SEARCHED])
     (work / "job.json").write_text(json.dumps(job, indent=1))
-
-    started = time.monotonic()
-    identify = subprocess.run([args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress",
-                               "none"], capture_output=True, text=True)
-    wall = time.monotonic() - started
-    if identify.returncode != 0:
-        sys.exit(f"identify failed (exit {identify.returncode}): {identify.stderr.strip()}")
+    wall = run_engine(args, "identify", work, "identify")
     result = json.loads((work / "identify/result.json").read_text())
     eta = result["viscosity"]["value"]
     low, high = result["viscosity"]["interval"]
@@ -129,18 +140,8 @@ def diagnose(args):
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_diagnose_"))
     work.mkdir(parents=True, exist_ok=True)
     lock = channel_scene(args, work, args.max_width)
-    job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
-           "track": {"csv": str(data), "column": "front_m", "observable": "front",
-                     "origin": [lock, 0, 0], "direction": [1, 0, 0], "band": 0.0065},
-           "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.01, "max": 1000}],
-           "max_generations": args.generations, "seed": 3}
-    (work / "job.json").write_text(json.dumps(job, indent=1))
-    started = time.monotonic()
-    run = subprocess.run([args.engine, "diagnose", work / "job.json", "--out", work / "diagnose", "--progress",
-                          "none"], capture_output=True, text=True)
-    wall = time.monotonic() - started
-    if run.returncode != 0:
-        sys.exit(f"diagnose failed (exit {run.returncode}): {run.stderr.strip()}")
+    (work / "job.json").write_text(json.dumps(front_job(args, data, lock, 0, [VISCOSITY_SEARCHED]), indent=1))
+    wall = run_engine(args, "diagnose", work, "diagnose")
     d = json.loads((work / "diagnose/diagnosis.json").read_text())
     print(f"dam break, {args.resolution} cells along the channel, {args.generations} generations per fit, "
           f"fitted frames {d['fitted_frames']}, {wall:.0f} s: {d['conclusion']}")
@@ -165,23 +166,14 @@ def identify_channel_width(args):
     work.mkdir(parents=True, exist_ok=True)
     lock = channel_scene(args, work, 0.1)
     eta, uncertainty = sum(VISCOMETER) / 2, (VISCOMETER[1] - VISCOMETER[0]) / 2
-    job = {"format": "viscoscope.job", "version": 1, "scene": "scene.json",
-           "track": {"csv": str(data), "column": "front_m", "observable": "front",
-                     "origin": [lock, 0, 0], "direction": [1, 0, 0], "band": 0.0065},
-           "parameters": [{"name": "solids[0].width", "initial": 0.1, "spread": 0.05, "min": 0.04,
-                           "max": args.max_width}],
-           "max_generations": args.generations, "seed": 3}
+    job = front_job(args, data, lock, 0, [{"name": "solids[0].width", "initial": 0.1, "spread": 0.05, "min": 0.04,
+                                            "max": args.max_width}])
     if args.unknown == "both":
         job["parameters"].append({"name": "viscosity", "initial": 5, "spread": 10, "min": 0.5, "max": 100})
     else:
         job["fixed"] = [{"name": "viscosity", "value": eta, "uncertainty": uncertainty}]
     (work / "job.json").write_text(json.dumps(job, indent=1))
-    started = time.monotonic()
-    identify = subprocess.run([args.engine, "identify", work / "job.json", "--out", work / "identify", "--progress",
-                               "none", "--no-fields"], capture_output=True, text=True)
-    wall = time.monotonic() - started
-    if identify.returncode != 0:
-        sys.exit(f"identify failed (exit {identify.returncode}): {identify.stderr.strip()}")
+    wall = run_engine(args, "identify", work, "identify", "--no-fields")
     result = json.loads((work / "identify/result.json").read_text())
     width = result["parameters"]["solids[0].width"]
     held = (f"η fixed at {eta:.4g} ± {uncertainty:.2g} Pa·s" if args.unknown == "channel_width" else "η searched too")
