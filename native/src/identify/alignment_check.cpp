@@ -27,8 +27,6 @@ namespace {
 constexpr double kAlignmentShift = 0.5;
 constexpr double kAlignmentStep = 1.15;
 
-json finiteOrNull(double value) { return std::isfinite(value) ? json(value) : json(); }
-
 std::optional<double> shiftedMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
                                      const std::array<double, 2>& E) {
     const auto u = [&](double t) { return inverse ? 1 / t : std::log(t); };

@@ -18,8 +18,6 @@ namespace {
 // version 5 gives every evaluation its grid shift.
 constexpr int kCheckpointVersion = 5;
 
-// E as JSON: null where a simulation failed (E = ∞), since JSON has no infinity.
-json finiteOrNull(double value) { return std::isfinite(value) ? json(value) : json(); }
 double finiteOrInfinite(const json& value) { return value.is_null() ? INFINITY : value.get<double>(); }
 
 Fidelity fidelityFromName(const json& name) {
@@ -48,6 +46,8 @@ std::string fingerprintOf(const Job& job) {
 }
 
 }  // namespace
+
+json finiteOrNull(double value) { return std::isfinite(value) ? json(value) : json(); }
 
 const char* fidelityName(Fidelity fidelity) { return fidelity == Fidelity::Coarse ? "coarse" : "full"; }
 

@@ -169,6 +169,8 @@ private:
     Clock::time_point sessionStart_;
     std::vector<double> coarseSeconds_, fineSeconds_;
 };
+// E as JSON: null where a simulation failed (E = ∞), since JSON has no infinity.
+nlohmann::json finiteOrNull(double value);
 // "%d" of whole seconds, for messages.
 std::string wholeSeconds(double seconds);
 
