@@ -47,7 +47,10 @@ json searched(const std::string& name, double initial, double logSpread) {
 // ρ g h₀, h₀ the height the liquid spans at the start (along gravity); 0 without liquid at the
 // start (emitters) or gravity.
 double hydrostaticStress(const Scene& scene) {
-    if (scene.gravity.norm() == 0) return 0.0;
+    const bool emittersOnly = std::all_of(scene.liquids.begin(), scene.liquids.end(), [](const LiquidSource& source) {
+        return std::holds_alternative<DiscEmitter>(source);
+    });
+    if (scene.gravity.norm() == 0 || emittersOnly) return 0.0;
     const sim::Simulation simulation(scene);
     const Eigen::Vector3d down = scene.gravity.normalized();
     double low = INFINITY, high = -INFINITY;

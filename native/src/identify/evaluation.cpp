@@ -2,6 +2,7 @@
 // silhouette through the camera → E = Σ_f ω_f E_f (+ a weighted scalar-track term).
 #include "identify/identify.h"
 
+#include "film/film.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -288,6 +289,43 @@ Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int 
 
 namespace {
 
+// The measured track's term: its relative error, and E's share of it.
+void scoreMeasuredTrack(const Job& job, const std::vector<double>& simulated, const std::vector<double>& measured,
+                        Evaluation& ev) {
+    if (measured.empty()) return;
+    ev.trackError = std::sqrt(normalizedSquaredError(simulated, measured));
+    ev.E += job.measuredTrack->weight * *ev.trackError * *ev.trackError;
+}
+
+// θ on the thin-film model: its front radius at every compared frame, scored against the measured
+// radius (the job has no silhouettes; parseJob checks).
+Evaluation evaluateFilm(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution) {
+    using Clock = std::chrono::steady_clock;
+    const auto start = Clock::now();
+    Evaluation ev;
+    ev.theta = theta;
+    ev.resolution = resolution;
+    film::AxisymmetricFilm film(sceneWithParameters(job, theta, resolution));
+    const double fps = job.scene.fps;
+    ev.frameE.assign(obs.simFrames.size(), 0.0);
+    ev.trackSimulated.assign(obs.simFrames.size(), NAN);
+    std::vector<double> simulated, measured;
+    for (int frame = 0; frame <= lastSimFrame(obs); ++frame) {
+        const auto frameStart = Clock::now();
+        film.advanceTo(frame / fps);
+        for (size_t i = 0; i < obs.measured.size(); ++i)
+            if (obs.simFrames[i] == frame && std::isfinite(obs.measured[i])) {
+                ev.trackSimulated[i] = film.frontRadius();
+                simulated.push_back(ev.trackSimulated[i]);
+                measured.push_back(obs.measured[i]);
+            }
+        ev.frameSeconds.push_back(std::chrono::duration<double>(Clock::now() - frameStart).count());
+    }
+    scoreMeasuredTrack(job, simulated, measured, ev);
+    ev.seconds = ev.simulationSeconds = std::chrono::duration<double>(Clock::now() - start).count();
+    return ev;
+}
+
 // One simulation of θ on the grid moved by `gridShift` cells, scored.
 Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vector<double>& theta, int resolution,
                           const fs::path& fieldsDir, double gridShift) {
@@ -396,10 +434,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
             if (obs.simFrames[i] >= 0) simulated.push_back(areas[i]);
         ev.E += obs.trackWeight * normalizedSquaredError(simulated, referenceTrack(obs));
     }
-    if (!trackMeasured.empty()) {
-        ev.trackError = std::sqrt(normalizedSquaredError(trackSimulated, trackMeasured));
-        ev.E += job.measuredTrack->weight * *ev.trackError * *ev.trackError;
-    }
+    scoreMeasuredTrack(job, trackSimulated, trackMeasured, ev);
     ev.seconds = seconds(start, Clock::now());
     return ev;
 }
@@ -423,8 +458,10 @@ Evaluation evaluate(const Job& job, const Observation& obs, const std::vector<do
         for (size_t i = 0; i < other.frameSeconds.size(); ++i) ev.frameSeconds[i] += other.frameSeconds[i];
     };
     const int n = job.placementSchedule == PlacementSchedule::EachEvaluation ? job.gridPlacements : 1;
-    // The first placement is the grid as asked for, and only it writes the fields.
-    Evaluation ev = evaluateOnGrid(job, obs, theta, resolution, fieldsDir, gridShift);
+    // The first placement is the grid as asked for, and only it writes the fields (a film has none).
+    Evaluation ev = job.forwardModel == ForwardModel::ThinFilm
+                        ? evaluateFilm(job, obs, theta, resolution)
+                        : evaluateOnGrid(job, obs, theta, resolution, fieldsDir, gridShift);
     for (int k = 1; k < n; ++k) {
         const Evaluation other = evaluateOnGrid(job, obs, theta, resolution, {}, gridShift + double(k) / n);
         add(ev, other);

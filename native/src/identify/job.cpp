@@ -1,6 +1,7 @@
 // The job file ("viscoscope.job", version 1): what addon/operators/identify.py `write_job` writes,
 // plus optional fields for the loop and for extracting the video ("extraction"). Validated up front
 // so a bad job fails before any simulation.
+#include "film/film.h"
 #include "identify/identify.h"
 
 #include <algorithm>
@@ -163,6 +164,29 @@ void requireOneMaterial(const std::vector<Job>& runs, const std::string& origin)
     }
 }
 
+// A thin-film job scores the film's radius against a measured one from the emitters' centre, and
+// has no grid to place against the scene.
+void requireFilmJob(Job& job, const nlohmann::json& doc, const std::string& origin) {
+    const std::string where = origin + ": forward_model: thin_film";
+    if (job.hasSilhouettes() || job.trackCsv)
+        throw InputError(where + " compares a measured track alone; the job has silhouettes");
+    if (!job.measuredTrack || job.measuredTrack->observable != TrackObservable::Radius)
+        throw InputError(where + " needs a measured track of the observable \"radius\"");
+    Scene scene = job.scene;
+    scene.domain.resolution = job.resolution;
+    if (const std::string problem = film::filmProblem(scene); !problem.empty())
+        throw InputError(origin + ": scene: " + problem);
+    const Eigen::Vector2d centre = std::get<DiscEmitter>(scene.liquids.front()).center.head<2>();
+    if ((job.measuredTrack->origin.head<2>() - centre).norm() > scene.cellSize())
+        throw InputError(origin + ": track.origin: the thin-film radius is measured from the emitters' centre (" +
+                         formatNumber(centre.x()) + ", " + formatNumber(centre.y()) + ")");
+    if (optionalInt(doc, "grid_placements", 1, 1, origin) > 1)
+        throw InputError(origin + ": grid_placements: the thin-film model has no grid to place; give 1 or none");
+    job.gridPlacements = 1;
+    job.placementSchedule = PlacementSchedule::EachEvaluation;
+    job.alignmentCheck = false;
+}
+
 // {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
 // keys and its entry's, so that every check a single-run job gets applies to each run alike.
 Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
@@ -238,7 +262,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     std::vector<std::string> known{"format", "version", "parameters", "fixed", "resolution", "max_generations", "seed",
                                    "population", "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method",
                                    "alignment_check", "grid_placements", "grid_placement_schedule",
-                                   "silhouette_comparison", "fidelity", "runs"};
+                                   "silhouette_comparison", "fidelity", "forward_model", "runs"};
     known.insert(known.end(), runKeys().begin(), runKeys().end());
     rejectUnknownKeys(doc, known, origin + ": ");
     if (doc.contains("runs")) return parseRuns(doc, origin, baseDir);
@@ -401,6 +425,12 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         job.fidelity.coarseGenerations = optionalInt(f, "coarse_generations", -1, -1, where);
         job.fidelity.minFineGenerations = optionalInt(f, "min_fine_generations", job.fidelity.minFineGenerations, 1, where);
     }
+    if (const auto model = optionalString(doc, "forward_model", origin)) {
+        if (*model == "thin_film") job.forwardModel = ForwardModel::ThinFilm;
+        else if (*model != "simulation")
+            throw InputError(origin + ": forward_model: expected \"simulation\" or \"thin_film\", got \"" + *model + "\"");
+    }
+    if (job.forwardModel == ForwardModel::ThinFilm) requireFilmJob(job, doc, origin);
     // Check the reference against the camera now, before any simulation.
     if (silhouettes) {
         const ReferenceManifest reference = loadReferenceManifest(job.referenceDir);

@@ -58,6 +58,11 @@ struct FidelitySchedule {
 constexpr double kDefaultGroundBandShare = 0.25;
 constexpr int kMaxGridPlacements = 8;  // Job::gridPlacements
 enum class PlacementSchedule { EachEvaluation, ByGeneration };  // Job::placementSchedule
+
+// What simulates θ: the 3D solver ("simulation", the default) or, for an axisymmetric spread on a
+// plane scored by a measured radius alone, the thin-film model of film/film.h ("thin_film"), which
+// runs minutes of slow spreading in well under a second.
+enum class ForwardModel { Simulation, ThinFilm };
 // The job's "grid_placement_schedule" names: "each_evaluation", "by_generation".
 const char* placementScheduleName(PlacementSchedule schedule);
 
@@ -150,6 +155,7 @@ struct Job {
     // 0.8 / 5.2 / 5.5 %, and 2 on each evaluation 11.7 / 4.5 / 1.3 / 1.4 / 1.3 / 1.3 % (half as
     // many evaluations, too few at η = 1 and 3). Only EachEvaluation with several parameters.
     PlacementSchedule placementSchedule = PlacementSchedule::ByGeneration;
+    ForwardModel forwardModel = ForwardModel::Simulation;
     FidelitySchedule fidelity;
     nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
     // A job with "runs" (several runs of one liquid, each its own scene and reference, sharing the
