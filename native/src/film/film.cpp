@@ -200,6 +200,10 @@ void AxisymmetricFilm::advanceTo(double time) {
     }
 }
 
+void AxisymmetricFilm::setThickness(const std::function<double(double)>& profile) {
+    for (size_t i = 0; i < h_.size(); ++i) h_[i] = std::max(profile((i + 0.5) * dr_), kPrecursorThickness);
+}
+
 double AxisymmetricFilm::frontRadius() const {
     for (int i = static_cast<int>(h_.size()) - 1; i >= 0; --i) {
         if (h_[i] < kFrontThickness) continue;

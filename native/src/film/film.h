@@ -12,14 +12,15 @@
 
 #include "scene/scene.h"
 
+#include <functional>
 #include <string>
 #include <vector>
 
 namespace viscoscope::film {
 
 // Why `scene` cannot be simulated as an axisymmetric film (empty: it can): it needs a single ground
-// plane for solid, gravity along −z, one or more disc emitters on the ground sharing one centre and
-// a Newtonian, power-law or Herschel–Bulkley liquid.
+// plane for solid, gravity along −z, one or more disc emitters on the ground sharing one centre (the
+// axis, also of a released current: setThickness) and a Newtonian, power-law or Herschel–Bulkley liquid.
 std::string filmProblem(const Scene& scene);
 
 // Thinner than this the ground counts as dry: the film lies on a precursor layer this thick, which
@@ -33,6 +34,9 @@ public:
     // Radial cells of the scene's cell size out to the nearest side of the domain from the emitters'
     // centre. Throws InputError with filmProblem's reason.
     explicit AxisymmetricFilm(const Scene& scene);
+    // Sets the film's thickness to profile(r) at each cell's centre (no thinner than the precursor):
+    // a current released from rest rather than fed.
+    void setThickness(const std::function<double(double)>& profile);
     // Integrates (backward Euler, Newton, steps that adapt to the film's change) up to `time` (s).
     // Throws std::runtime_error if the step falls below 1 µs without converging.
     void advanceTo(double time);
