@@ -293,6 +293,66 @@ TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
     expectRefused("", writeJob(job(), "short.json"), "compared frames, too few to fit 3 and predict at least 2 more");
 }
 
+// A thin-film job whose scene or track the film cannot hold is refused before any work, in one line
+// naming the field; a good one runs.
+TEST_F(CliIdentify, AThinFilmJobRefusesWhatTheFilmCannotHoldInOneLine) {
+    const json emitter = {{"type", "emitter"}, {"center", {0, 0, 0}}, {"normal", {0, 0, 1}}, {"radius", 0.008}, {"flux", 3e-6}};
+    const json scene = {{"format", "viscoscope.scene"},
+                        {"version", 1},
+                        {"domain", {{"min", {-0.1, -0.1, -0.01}}, {"max", {0.1, 0.1, 0.03}}, {"resolution", 100}}},
+                        {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
+                        {"liquids", {emitter}},
+                        {"material", {{"density", 1000}, {"viscosity", 20.0}}},
+                        {"fps", 0.5},
+                        {"frames", 11}};
+    std::ofstream(dir_ / "radius.csv") << "time_s,radius_m\n4,0.03\n8,0.04\n12,0.048\n16,0.055\n20,0.06\n";
+    const json track = {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}};
+    const auto filmJob = [&](const json& sceneDoc) {
+        std::ofstream(dir_ / "film_scene.json") << sceneDoc.dump();
+        return json{{"format", "viscoscope.job"}, {"version", 1},  {"scene", "film_scene.json"}, {"track", track},
+                    {"forward_model", "thin_film"},  {"parameters", {{{"name", "viscosity"}}}}, {"max_generations", 2}};
+    };
+    const auto expectRefused = [&](const json& doc, const std::string& fragment) {
+        const CommandResult r = run("identify " + writeJob(doc, "film.json").string() + " --out " +
+                                    (dir_ / "film_out").string() + " --progress json --no-plots");
+        EXPECT_EQ(r.exitCode, 2) << r.err;
+        EXPECT_NE(r.err.find(fragment), std::string::npos) << "stderr: " << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "stderr: " << r.err;
+        EXPECT_FALSE(fs::exists(dir_ / "film_out" / "result.json"));
+        std::printf("[ film     ] %s", r.err.c_str());
+    };
+    json doc = filmJob(scene);
+    doc["forward_model"] = "lattice_boltzmann";
+    expectRefused(doc, "forward_model: expected \"simulation\" or \"thin_film\", got \"lattice_boltzmann\"");
+    doc = job();
+    doc["forward_model"] = "thin_film";
+    expectRefused(doc, "forward_model: thin_film compares a measured track alone");
+    doc = filmJob(scene);
+    doc["track"]["observable"] = "front";
+    doc["track"]["direction"] = {1, 0, 0};
+    expectRefused(doc, "forward_model: thin_film needs a measured track of the observable \"radius\"");
+    doc = filmJob(scene);
+    doc["track"]["origin"] = {0.05, 0, 0};
+    expectRefused(doc, "track.origin: the thin-film radius is measured from the emitters' centre (0, 0)");
+    doc = filmJob(scene);
+    doc["grid_placements"] = 2;
+    expectRefused(doc, "grid_placements: the thin-film model has no grid to place");
+    json carreau = scene;
+    carreau["material"]["model"] = {{"type", "carreau"}, {"eta_infinity", 1.0}, {"relaxation_time", 1.0}, {"flow_index", 0.5}};
+    expectRefused(filmJob(carreau), "scene: the thin-film model holds newtonian, power_law and herschel_bulkley materials");
+    json walled = scene;
+    walled["solids"].push_back({{"type", "box"}, {"min", {0.05, -0.1, -0.01}}, {"max", {0.1, 0.1, 0.03}}});
+    expectRefused(filmJob(walled), "scene: the thin-film model needs a single ground plane");
+    json raised = scene;
+    raised["liquids"][0]["center"] = {0, 0, 0.02};
+    expectRefused(filmJob(raised), "liquids[0]: the thin-film model needs the emitter on the ground");
+    const CommandResult good = run("identify " + writeJob(filmJob(scene), "film.json").string() + " --out " +
+                                   (dir_ / "film_out").string() + " --progress none --no-plots");
+    EXPECT_EQ(good.exitCode, 0) << good.err;
+    EXPECT_TRUE(fs::exists(dir_ / "film_out" / "result.json"));
+    EXPECT_FALSE(fs::exists(dir_ / "film_out" / "fields"));
+}
+
 TEST_F(CliIdentify, ASecondRunOnAFolderInUseIsRefused) {
     const fs::path jobFile = writeJob(job(3));
     const fs::path out = dir_ / "shared_out";

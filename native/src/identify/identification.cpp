@@ -176,6 +176,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const double coarseTolerance = 0.02 + 10 * job.toleranceX;
     const Checkpoint checkpoint(job, outDir);
     const FieldsStore fields(outDir, checkpoint.fingerprint(), plan.fullFrames + 1);
+    // The thin-film model has a radius, no 3D fields for Blender.
+    const bool writeFields = options.writeFields && job.forwardModel == ForwardModel::Simulation;
 
     SearchState state = [&] {
         if (std::optional<SearchState> saved = checkpoint.load(job)) return std::move(*saved);
@@ -256,7 +258,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 origins.back() = "parabola";
             }
         }
-        const bool stageFields = options.writeFields && !coarse;
+        const bool stageFields = writeFields && !coarse;
         fields.clearStaging();
         EvaluationBatch batch{{}, coarse, plan.resolution(fidelity), placementShift(g), {}};
         for (size_t k = 0; k < xs.size(); ++k) {
@@ -515,7 +517,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             doc["run_E"] = e.evaluation.runE;
             break;
         }
-    if (options.writeFields) doc["fields"] = fields.keep(job, obs, *best, plan.fullResolution);
+    if (writeFields) doc["fields"] = fields.keep(job, obs, *best, plan.fullResolution);
     writeEvaluationsCsv(job, state.evaluated, outDir / "evaluations.csv");
     result.seconds = elapsed;
     result.document = doc;
