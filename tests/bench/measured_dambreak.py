@@ -28,6 +28,10 @@ with `--unknown both` the front alone identifies the two at once.
     /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
     /usr/bin/python3 tests/bench/measured_dambreak.py --unknown channel_width [--max-width 0.3]
     /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose [--resolution 60] [--generations 6]
+    /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose --experiment particles
+
+`--experiment particles` takes the second dam break of that folder instead (syrup with 15 % plastic
+particles, a lock filled 0.084 m deep, ρ = 1391 kg/m³, no viscometer): diagnose only.
 """
 import argparse
 import json
@@ -39,6 +43,15 @@ import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 VISCOMETER = (9.876, 10.32)  # Pa·s, the lowest and highest apparent viscosity read
+# The two dam breaks of that folder: the lock's fill depth (m), the liquid's density (kg/m³), the
+# channel's length modelled past the 0.2 m lock (m, beyond the farthest front) and the domain's height.
+EXPERIMENTS = {
+    "validation": {"data": "dambreak_syrup_validation.csv", "depth": 0.0443, "density": 1540, "length": 0.55,
+                   "height": 0.055},
+    # Syrup with 15 % plastic particles; no viscometer. Its front reaches 0.474 m from the gate.
+    "particles": {"data": "dambreak_syrup_example.csv", "depth": 0.084, "density": 1391, "length": 0.75,
+                  "height": 0.1},
+}
 
 
 def front_job(args, data, lock, origin_y, parameters):
@@ -64,7 +77,9 @@ VISCOSITY_SEARCHED = {"name": "viscosity", "initial": 5, "spread": 10, "min": 0.
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", default=str(ROOT.parent / "shared/data/measured/dambreak_syrup_validation.csv"))
+    parser.add_argument("--experiment", choices=sorted(EXPERIMENTS), default="validation",
+                        help="which dam break: the syrup with its viscometer, or the one with particles (--diagnose only)")
+    parser.add_argument("--data", help="the front's CSV (default: the experiment's in ../shared/data/measured)")
     parser.add_argument("--engine", default=str(ROOT / "build/bin/viscoscope"))
     parser.add_argument("--landscape", default=str(ROOT / "build/bench/identify_landscape_bench"))
     parser.add_argument("--resolution", type=int, default=100, help="cells along the channel")
@@ -75,6 +90,10 @@ def main():
     parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
     parser.add_argument("--diagnose", action="store_true", help="run viscoscope diagnose on the front")
     args = parser.parse_args()
+    args.lock = EXPERIMENTS[args.experiment]
+    args.data = args.data or str(ROOT.parent / "shared/data/measured" / args.lock["data"])
+    if args.experiment != "validation" and not args.diagnose:
+        sys.exit("only the validation dam break has a viscometer to compare with: use --diagnose")
     if args.diagnose:
         return diagnose(args)
     if args.unknown != "viscosity":
@@ -84,13 +103,13 @@ def main():
         sys.exit(f"measured data not found: {data}")
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_"))
     work.mkdir(parents=True, exist_ok=True)
-    lock, depth, length = 0.2, 0.0443, 0.55
+    lock, depth, length = 0.2, args.lock["depth"], args.lock["length"]
     width = args.channel_width or 2 * length / args.resolution
     scene = {"format": "viscoscope.scene", "version": 1,
-             "domain": {"min": [0, 0, 0], "max": [length, width, 0.055], "resolution": args.resolution,
+             "domain": {"min": [0, 0, 0], "max": [length, width, args.lock["height"]], "resolution": args.resolution,
                         "periodic": [False, args.channel_width is None, False]},
              "liquids": [{"type": "box", "min": [0, 0, 0], "max": [lock, width, depth]}],
-             "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
+             "material": {"density": args.lock["density"], "viscosity": 10, "surface_tension": 0.0},
              "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
     (work / "scene.json").write_text(json.dumps(scene, indent=1))
     job = front_job(args, data, lock, width / 2, [VISCOSITY_SEARCHED])
@@ -119,14 +138,14 @@ def main():
 def channel_scene(args, work, width):
     """DIR/scene.json: the lock in a channel `width` wide inside a domain --max-width wide plus two
     cells, so that the widest walls searched stay inside it; the lock's length and depth."""
-    lock, depth, length = 0.2, 0.0443, 0.55
+    lock, depth, length = 0.2, args.lock["depth"], args.lock["length"]
     dx = length / args.resolution
     half = args.max_width / 2 + 2 * dx
     scene = {"format": "viscoscope.scene", "version": 1,
-             "domain": {"min": [0, -half, 0], "max": [length, half, 0.055], "resolution": args.resolution},
+             "domain": {"min": [0, -half, 0], "max": [length, half, args.lock["height"]], "resolution": args.resolution},
              "solids": [{"type": "channel", "center_y": 0, "width": width}],
              "liquids": [{"type": "box", "min": [0, -half, 0], "max": [lock, half, depth]}],
-             "material": {"density": 1540, "viscosity": 10, "surface_tension": 0.0},
+             "material": {"density": args.lock["density"], "viscosity": 10, "surface_tension": 0.0},
              "gravity": [0, 0, -9.81], "fps": 4, "frames": 1, "seed": 3}
     (work / "scene.json").write_text(json.dumps(scene, indent=1))
     return lock
