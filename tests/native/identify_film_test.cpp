@@ -171,4 +171,48 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
     fs::remove_all(root);
 }
 
+// With η fixed at an independent reading (a viscometer's), the slip the radius alone hides shows:
+// the film spreads faster than that η allows, and only slip explains it. identify refuses such a job
+// (nothing to search); diagnose holds the base at the fixed value and fits the slip length alone.
+TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
+    const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_fixed_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const double eta = 50, slip = 0.003;
+    film::AxisymmetricFilm reference(
+        parseScene(filmScene(1000, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}}), "reference"));
+    {
+        std::ofstream csv(dir / "radius.csv");
+        csv << "time_s,radius_m\n";
+        for (int f = 1; f <= 60; ++f) {
+            reference.advanceTo(4.0 * f);
+            csv << 4.0 * f << "," << 5e-4 * std::round(reference.frontRadius() / 5e-4) << "\n";
+        }
+    }
+    std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}).dump();
+    const json job = {{"format", "viscoscope.job"},
+                      {"version", 1},
+                      {"scene", "scene.json"},
+                      {"forward_model", "thin_film"},
+                      {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
+                      {"fixed", {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}}},
+                      {"max_generations", 60},
+                      {"seed", 5}};
+    std::ofstream(dir / "job.json") << job.dump();
+    const identify::Job parsed = identify::loadJob(dir / "job.json");
+    EXPECT_THROW(identify::identify(parsed, dir / "identify"), InputError);
+    const identify::Diagnosis d = identify::diagnose(parsed, dir / "out");
+    ASSERT_TRUE(d.chosen.has_value());
+    const identify::ModelFit& after = d.candidates[*d.chosen];
+    ASSERT_EQ(after.parameters, std::vector<std::string>{"slip_length"});
+    std::printf("η fixed at %.0f, hidden slip %.1f mm: named \"%s\", slip %.3g mm [%.3g, %.3g] (%+.1f %%); radius error "
+                "%.2f %% before, %.2f %% after; %zu candidates tried\n",
+                eta, 1e3 * slip, after.model.c_str(), 1e3 * after.theta[0], 1e3 * after.interval[0][0],
+                1e3 * after.interval[0][1], 100 * (after.theta[0] / slip - 1), 100 * *d.base.trackError,
+                100 * *after.trackError, d.candidates.size());
+    EXPECT_EQ(after.model, "wall_slip");
+    EXPECT_LE(*after.trackError, 0.5 * *d.base.trackError);
+    EXPECT_NEAR(after.theta[0] / slip, 1.0, 0.25);
+    fs::remove_all(dir);
+}
+
 }  // namespace

@@ -257,16 +257,19 @@ RunScore scoreRun(const Job& run, const Observation& obs, const std::vector<doub
 // Fits a model to the fitted frames, then scores θ* on every frame of every run.
 ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting, const std::vector<Observation>& observations,
                   const std::vector<int>& fitCounts, const fs::path& dir, const DiagnoseOptions& options, json& runSeries) {
-    IdentifyOptions identifyOptions = options.identify;
-    identifyOptions.writeFields = false;
-    const IdentificationResult result = identify(fitting, dir, identifyOptions);
     ModelFit fit;
     fit.model = model;
     for (const ParameterSpec& p : full.parameters) fit.parameters.push_back(p.name());
-    fit.theta = result.theta;
-    fit.interval = result.interval;
-    fit.evaluations = result.evaluations;
-    fit.seconds = result.seconds;
+    // A base with every unknown fixed has nothing to fit: it is scored where it is held.
+    if (!fitting.parameters.empty()) {
+        IdentifyOptions identifyOptions = options.identify;
+        identifyOptions.writeFields = false;
+        const IdentificationResult result = identify(fitting, dir, identifyOptions);
+        fit.theta = result.theta;
+        fit.interval = result.interval;
+        fit.evaluations = result.evaluations;
+        fit.seconds = result.seconds;
+    }
     const std::vector<Job> runs = runsOf(full);
     int fittedFrames = 0;
     runSeries = json::array();

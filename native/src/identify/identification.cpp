@@ -149,6 +149,9 @@ std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count) 
 }  // namespace
 
 IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const IdentifyOptions& options) {
+    if (jobIn.parameters.empty())
+        throw InputError(jobIn.file.string() + ": parameters: nothing to search, every unknown is fixed (diagnose takes "
+                         "such a job)");
     fs::create_directories(outDir);
     Job job = jobIn;
     prepareReference(job, outDir);

@@ -343,12 +343,18 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     job.timeOffset = optionalNumber(doc, "time_offset_s", 0.0, origin);
     job.lastSourceFrame = frameEnd - frameStart;
 
-    if (!doc.contains("parameters") || !doc.at("parameters").is_array() || doc.at("parameters").empty())
+    // Nothing searched is a job only diagnose takes: every unknown fixed at a measured value (the
+    // base model held there, each effect searching its own parameters).
+    const bool allFixed = given("fixed") && doc.at("fixed").is_array() && !doc.at("fixed").empty();
+    if (!allFixed && (!doc.contains("parameters") || !doc.at("parameters").is_array() || doc.at("parameters").empty()))
         throw InputError(origin + ": parameters: must be a non-empty array");
+    if (given("parameters") && !doc.at("parameters").is_array())
+        throw InputError(origin + ": parameters: must be an array");
+    const nlohmann::json searchedParameters = given("parameters") ? doc.at("parameters") : nlohmann::json::array();
     std::set<std::string> names;
-    for (size_t i = 0; i < doc.at("parameters").size(); ++i) {
+    for (size_t i = 0; i < searchedParameters.size(); ++i) {
         const std::string where = origin + ": parameters[" + std::to_string(i) + "]";
-        ParameterSpec spec = parseSearchedParameter(doc.at("parameters").at(i), job.scene, where);
+        ParameterSpec spec = parseSearchedParameter(searchedParameters.at(i), job.scene, where);
         if (!names.insert(spec.name()).second) throw InputError(where + ".name: \"" + spec.name() + "\" twice");
         job.parameters.push_back(spec);
     }
