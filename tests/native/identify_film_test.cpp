@@ -103,6 +103,19 @@ json filmScene(int resolution, const json& material) {
             {"frames", 61}};
 }
 
+// DIR/radius.csv, the record: every 4 s for 240 s from a film of `material` on 0.4 mm cells, in
+// 0.5 mm steps; and DIR/scene.json, the identification's Newtonian scene on 1 mm cells.
+void writeRecordAndScene(const fs::path& dir, const json& material) {
+    film::AxisymmetricFilm reference(parseScene(filmScene(1000, material), "reference"));
+    std::ofstream csv(dir / "radius.csv");
+    csv << "time_s,radius_m\n";
+    for (int f = 1; f <= 60; ++f) {
+        reference.advanceTo(4.0 * f);
+        csv << 4.0 * f << "," << 5e-4 * std::round(reference.frontRadius() / 5e-4) << "\n";
+    }
+    std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}).dump();
+}
+
 struct HiddenEffect {
     const char* expected;  // the effect diagnose should name; "" for none
     json material;
@@ -128,17 +141,7 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
     for (const HiddenEffect& hidden : cases) {
         const fs::path dir = root / (*hidden.expected ? hidden.expected : "newtonian");
         fs::create_directories(dir);
-        // The record: every 4 s for 240 s from a film on 0.4 mm cells, in 0.5 mm steps.
-        film::AxisymmetricFilm reference(parseScene(filmScene(1000, hidden.material), "reference"));
-        {
-            std::ofstream csv(dir / "radius.csv");
-            csv << "time_s,radius_m\n";
-            for (int f = 1; f <= 60; ++f) {
-                reference.advanceTo(4.0 * f);
-                csv << 4.0 * f << "," << 5e-4 * std::round(reference.frontRadius() / 5e-4) << "\n";
-            }
-        }
-        std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}).dump();
+        writeRecordAndScene(dir, hidden.material);
         json job = {{"format", "viscoscope.job"},
                     {"version", 1},
                     {"scene", "scene.json"},
@@ -178,17 +181,7 @@ TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
     const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_fixed_" + std::to_string(::getpid()));
     fs::create_directories(dir);
     const double eta = 50, slip = 0.003;
-    film::AxisymmetricFilm reference(
-        parseScene(filmScene(1000, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}}), "reference"));
-    {
-        std::ofstream csv(dir / "radius.csv");
-        csv << "time_s,radius_m\n";
-        for (int f = 1; f <= 60; ++f) {
-            reference.advanceTo(4.0 * f);
-            csv << 4.0 * f << "," << 5e-4 * std::round(reference.frontRadius() / 5e-4) << "\n";
-        }
-    }
-    std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}).dump();
+    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}});
     const json job = {{"format", "viscoscope.job"},
                       {"version", 1},
                       {"scene", "scene.json"},
