@@ -30,6 +30,9 @@ with `--unknown both` the front alone identifies the two at once.
     /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose [--resolution 60] [--generations 6]
     /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose --experiment particles
 
+`--fix-viscosity` holds η at the viscometer's (10.10 ± 0.22 Pa·s, the job's `fixed`, nothing
+searched) and lets each effect fit its own parameters alone.
+
 `--experiment particles` takes the second dam break of that folder instead (syrup with 15 % plastic
 particles, a lock filled 0.084 m deep, ρ = 1391 kg/m³, no viscometer): diagnose only.
 """
@@ -89,9 +92,13 @@ def main():
     parser.add_argument("--unknown", choices=("viscosity", "channel_width", "both"), default="viscosity")
     parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
     parser.add_argument("--diagnose", action="store_true", help="run viscoscope diagnose on the front")
+    parser.add_argument("--fix-viscosity", action="store_true",
+                        help="with --diagnose: η held at the viscometer's, each effect fitting its own parameters alone")
     args = parser.parse_args()
     args.lock = EXPERIMENTS[args.experiment]
     args.data = args.data or str(ROOT.parent / "shared/data/measured" / args.lock["data"])
+    if args.fix_viscosity and (args.experiment != "validation" or not args.diagnose):
+        sys.exit("--fix-viscosity needs --diagnose on the validation dam break, the one with a viscometer")
     if args.experiment != "validation" and not args.diagnose:
         sys.exit("only the validation dam break has a viscometer to compare with: use --diagnose")
     if args.diagnose:
@@ -159,7 +166,10 @@ def diagnose(args):
     work = pathlib.Path(args.work or tempfile.mkdtemp(prefix="viscoscope_dambreak_diagnose_"))
     work.mkdir(parents=True, exist_ok=True)
     lock = channel_scene(args, work, args.max_width)
-    (work / "job.json").write_text(json.dumps(front_job(args, data, lock, 0, [VISCOSITY_SEARCHED]), indent=1))
+    job = front_job(args, data, lock, 0, [] if args.fix_viscosity else [VISCOSITY_SEARCHED])
+    if args.fix_viscosity:
+        job["fixed"] = [{"name": "viscosity", "value": sum(VISCOMETER) / 2, "uncertainty": (VISCOMETER[1] - VISCOMETER[0]) / 2}]
+    (work / "job.json").write_text(json.dumps(job, indent=1))
     wall = run_engine(args, "diagnose", work, "diagnose")
     d = json.loads((work / "diagnose/diagnosis.json").read_text())
     print(f"dam break, {args.resolution} cells along the channel, {args.generations} generations per fit, "
