@@ -32,6 +32,12 @@ double singleGroundHeight(const Scene& scene) {
     return ground ? ground->height : NAN;
 }
 
+// How far the film may spread from its axis at `c`: to the domain's nearest side.
+double reachFrom(const Scene& scene, const Eigen::Vector2d& c) {
+    return std::min({c.x() - scene.domain.min.x(), scene.domain.max.x() - c.x(), c.y() - scene.domain.min.y(),
+                     scene.domain.max.y() - c.y()});
+}
+
 }  // namespace
 
 std::string filmProblem(const Scene& scene) {
@@ -51,8 +57,7 @@ std::string filmProblem(const Scene& scene) {
             return "liquids[" + std::to_string(i) + "]: the thin-film model needs every emitter at one centre";
     }
     const Eigen::Vector2d c = first->center.head<2>();
-    const double reach = std::min({c.x() - scene.domain.min.x(), scene.domain.max.x() - c.x(),
-                                   c.y() - scene.domain.min.y(), scene.domain.max.y() - c.y()});
+    const double reach = reachFrom(scene, c);
     if (!(reach >= kMinCells * scene.cellSize()))
         return "the thin-film model needs " + std::to_string(kMinCells) +
                " cells or more from the emitters' centre to the domain's nearest side";
@@ -65,8 +70,7 @@ AxisymmetricFilm::AxisymmetricFilm(const Scene& scene) {
     if (const std::string problem = filmProblem(scene); !problem.empty()) throw InputError(problem);
     dr_ = scene.cellSize();
     const Eigen::Vector2d c = std::get<DiscEmitter>(scene.liquids.front()).center.head<2>();
-    const double reach = std::min({c.x() - scene.domain.min.x(), scene.domain.max.x() - c.x(),
-                                   c.y() - scene.domain.min.y(), scene.domain.max.y() - c.y()});
+    const double reach = reachFrom(scene, c);
     const int cells = static_cast<int>(reach / dr_);
     for (int i = 0; i < cells; ++i) area_.push_back(kPi * dr_ * dr_ * (2.0 * i + 1.0));
     h_.assign(cells, kPrecursorThickness);
