@@ -296,6 +296,11 @@ def identify_args(engine, job_path, out_dir, threads=0):
         _threads(engine, "identify", threads)
 
 
+def diagnose_args(engine, job_path, out_dir, threads=0):
+    return [engine, "diagnose", job_path, "--out", out_dir, "--progress", "json"] + \
+        _threads(engine, "diagnose", threads)
+
+
 # A job's "extraction" names (observe.h, parseExtractionOptions) → `extract`'s options, so that the
 # Preview's masks are drawn from the same settings as Identify's.
 EXTRACT_OPTIONS = {
@@ -355,8 +360,12 @@ def format_seconds(seconds):
     return "%ds" % seconds
 
 
-def progress_fraction(event):
-    """Fraction done in [0, 1] from a progress event (frame/frames or generation/generations)."""
+def progress_fraction(event, fit=None):
+    """Fraction done in [0, 1] from a progress event (frame/frames or generation/generations); within
+    a diagnosis, `fit` is (this fit's number from 1, the number of fits) and each fit is a share."""
+    if fit is not None:
+        number, count = fit
+        return min(max((number - 1 + progress_fraction(event)) / count, 0.0), 1.0) if count > 0 else 0.0
     if not event:
         return 0.0
     for num, den in (("frame", "frames"), ("generation", "generations")):

@@ -37,6 +37,27 @@ PLACEMENT_SCHEDULE_ITEMS = [
      "much per evaluation)"),
 ]
 
+# What the identification compares against (the job's "video" and/or measured "track").
+REFERENCE_ITEMS = [
+    ('CLIP', "Clip", "The footage's silhouettes, seen through the matched camera"),
+    ('TRACK', "Measured Track", "A lab's record of a front or a radius over time (CSV), without footage"),
+    ('BOTH', "Clip and Track", "The footage's silhouettes and a measured track together"),
+]
+
+# The measured track's observable (the job's track "observable").
+OBSERVABLE_ITEMS = [
+    ('front', "Front", "How far the liquid near the ground reaches from the origin along the direction"),
+    ('radius', "Radius", "The radius of the liquid on the ground around the vertical through the origin"),
+]
+
+# The job's "forward_model".
+FORWARD_MODEL_ITEMS = [
+    ('simulation', "3D Simulation", "The engine's 3D fluid simulation"),
+    ('thin_film', "Thin Film",
+     "An axisymmetric lubrication model of a current spreading on the ground from emitters at one centre: "
+     "for slow spreading over minutes, which the 3D simulation cannot afford (measured radius only)"),
+]
+
 
 def _cup_update(self, _context):
     from . import cup_mesh
@@ -119,8 +140,26 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     work_dir: StringProperty(name="Work Folder", subtype='DIR_PATH', default="//viscoscope",
                              description="Where scene, job and result files are written")
     # Reference
+    reference_kind: EnumProperty(name="Reference", items=REFERENCE_ITEMS, default='CLIP')
     video_path: StringProperty(name="Video", subtype='FILE_PATH', default="")
     clip: PointerProperty(name="Clip", type=bpy.types.MovieClip)
+    track_csv: StringProperty(name="Track CSV", subtype='FILE_PATH', default="",
+                              description="Measured track: first column time_s, then the measured column, metres")
+    track_column: StringProperty(name="Column", default="",
+                                 description="The CSV's measured column (empty: its second column)")
+    track_observable: EnumProperty(name="Observable", items=OBSERVABLE_ITEMS, default='front')
+    track_origin: FloatVectorProperty(name="Origin", subtype='TRANSLATION', unit='LENGTH', size=3,
+                                      description="Where the lab measured from, in the scene")
+    track_direction: FloatVectorProperty(name="Direction", subtype='XYZ', size=3, default=(1.0, 0.0, 0.0),
+                                         description="Along which the front is measured (horizontal)")
+    track_band: FloatProperty(name="Band", unit='LENGTH', default=0.005, min=1e-6, precision=4,
+                              description="Liquid within this of the ground and of the measured line counts "
+                                          "towards the front")
+    track_weight: FloatProperty(name="Weight", default=1.0, min=1e-6,
+                                description="The track's weight in E beside the silhouettes")
+    time_offset: FloatProperty(name="Time Offset", unit='TIME_ABSOLUTE', default=0.0,
+                               description="Simulation time at the reference's time 0 (footage or CSV)")
+    forward_model: EnumProperty(name="Forward Model", items=FORWARD_MODEL_ITEMS, default='simulation')
     # Camera
     camera: PointerProperty(name="Camera", type=bpy.types.Object,
                             poll=lambda self, obj: obj.type == 'CAMERA')
@@ -186,6 +225,14 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     # Why the result is probably wrong, one reason a line; while there are any, η is not applied.
     result_doubts: StringProperty(name="Doubts", default="")
     result_applied: BoolProperty(default=False)
+    # Diagnosis: diagnosis.json's conclusion, its figures one line each, and the chosen model's
+    # material as the engine writes it (JSON), which Apply Effect puts into the Fluid Material.
+    diagnosis_conclusion: StringProperty(name="Conclusion", default="")
+    diagnosis_report: StringProperty(name="Report", default="")
+    diagnosis_effect: StringProperty(name="Effect", default="")
+    diagnosis_material: StringProperty(default="")
+    diagnosis_source: StringProperty(default="")  # what Apply Effect records as the material's origin
+    diagnosis_applied: BoolProperty(default=False)
     # Fluid material
     fluid: PointerProperty(type=ViscoscopeFluid)
     # Transfer simulation
@@ -196,6 +243,7 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     identify_job: PointerProperty(type=ViscoscopeJobStatus)
     simulate_job: PointerProperty(type=ViscoscopeJobStatus)
     extract_job: PointerProperty(type=ViscoscopeJobStatus)
+    diagnose_job: PointerProperty(type=ViscoscopeJobStatus)
 
 
 classes = (

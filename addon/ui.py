@@ -97,10 +97,24 @@ class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
             row.alert = True
             row.label(text="Engine not found" if "not found" in str(exc) else "Engine not usable", icon='ERROR')
             row.operator("preferences.addon_show", text="", icon='PREFERENCES').module = prefs.ADDON_ID
-        layout.operator("viscoscope.load_video", icon='FILE_MOVIE')
-        if vs.clip:
-            draw_message(layout, context, "%s · %d × %d px · %d frames · %.3g fps" % (
-                vs.clip.name, vs.clip.size[0], vs.clip.size[1], vs.clip.frame_duration, vs.clip.fps))
+        layout.prop(vs, "reference_kind", text="")
+        if vs.reference_kind in {'CLIP', 'BOTH'}:
+            layout.operator("viscoscope.load_video", icon='FILE_MOVIE')
+            if vs.clip:
+                draw_message(layout, context, "%s · %d × %d px · %d frames · %.3g fps" % (
+                    vs.clip.name, vs.clip.size[0], vs.clip.size[1], vs.clip.frame_duration, vs.clip.fps))
+        if vs.reference_kind in {'TRACK', 'BOTH'}:
+            draw_labelled(layout, vs, "track_csv")
+            col = layout.column(align=True)
+            col.prop(vs, "track_column")
+            col.prop(vs, "track_observable", text="")
+            col.prop(vs, "track_origin")
+            if vs.track_observable == 'front':
+                col.prop(vs, "track_direction")
+            col.prop(vs, "track_band")
+            if vs.reference_kind == 'BOTH':
+                col.prop(vs, "track_weight")
+        layout.prop(vs, "time_offset")
         draw_labelled(layout, vs, "work_dir")
 
 
@@ -200,13 +214,16 @@ class VIEW3D_PT_viscoscope_identify(_ViscoscopePanel, bpy.types.Panel):
         layout = self.layout
         vs = context.scene.viscoscope
         col = layout.column(align=True)
+        col.prop(vs, "forward_model", text="")
         col.prop(vs, "eta_initial")
         col.prop(vs, "eta_spread")
         col.prop(vs, "identify_resolution")
         col.prop(vs, "max_generations")
-        col.prop(vs, "grid_placements")
         row = col.row()
-        row.enabled = vs.grid_placements > 1
+        row.enabled = vs.forward_model != 'thin_film'  # the film has no grid to place
+        row.prop(vs, "grid_placements")
+        row = col.row()
+        row.enabled = vs.grid_placements > 1 and vs.forward_model != 'thin_film'
         row.prop(vs, "placement_schedule", text="")
         col.prop(vs, "time_budget_minutes")
         draw_job(layout, context, "identify", "viscoscope.identify", "Identify Viscosity",
@@ -236,6 +253,35 @@ class VIEW3D_PT_viscoscope_results(_ViscoscopePanel, bpy.types.Panel):
                 layout.label(text=name[:-4].capitalize())
                 layout.template_icon(icon_value=img.preview.icon_id, scale=8.0)
         layout.operator("viscoscope.load_fields", icon='VOLUME_DATA')
+
+
+class VIEW3D_PT_viscoscope_diagnose(_ViscoscopePanel, bpy.types.Panel):
+    bl_label = "Diagnose"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        vs = context.scene.viscoscope
+        draw_message(layout, context, "Fits the Identify panel's job and each effect the model may lack "
+                                      "(shear thinning, a yield stress, wall slip, side walls): one "
+                                      "identification each, within its time budget")
+        draw_job(layout, context, "diagnose", "viscoscope.diagnose", "Diagnose",
+                 resume_op="viscoscope.diagnose_resume")
+        if not vs.diagnosis_conclusion:
+            return
+        box = layout.box()
+        draw_message(box, context, vs.diagnosis_conclusion.capitalize(), icon='VIEWZOOM')
+        for line in vs.diagnosis_report.splitlines():
+            draw_message(box, context, line)
+        if vs.diagnosis_material:
+            if vs.diagnosis_applied:
+                draw_message(box, context, "Applied to the Fluid Material", icon='CHECKMARK')
+            else:
+                box.operator("viscoscope.apply_effect", icon='CHECKMARK')
+        img = bpy.data.images.get("diagnosis.png")
+        if img is not None and img.preview is not None:
+            layout.label(text="Residual over time, before and after")
+            layout.template_icon(icon_value=img.preview.icon_id, scale=8.0)
 
 
 class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
@@ -295,6 +341,7 @@ classes = (
     VIEW3D_PT_viscoscope_silhouettes,
     VIEW3D_PT_viscoscope_identify,
     VIEW3D_PT_viscoscope_results,
+    VIEW3D_PT_viscoscope_diagnose,
     VIEW3D_PT_viscoscope_fluid,
     VIEW3D_PT_viscoscope_transfer,
 )

@@ -7,9 +7,9 @@ import os
 
 import bpy
 
-from .. import engine, prefs, scene_export, schema
+from .. import engine, prefs, scene_export, schema, units
 from ..atomic_files import written_atomically
-from .runner import EngineOperator, is_running
+from .runner import EngineOperator, is_running, start_afresh
 from .silhouettes import extraction_settings, reference_video
 
 JOB_FORMAT = "viscoscope.job"
@@ -43,42 +43,83 @@ def identify_resolution(scene, scene_dict):
     return needed, "Resolution %d used: the cup's hole needs %.1f cells across" % (needed, MIN_HOLE_CELLS)
 
 
+def measured_track(scene):
+    """The Reference panel's measured track as a job's "track" (metres, the CSV's path absolute)."""
+    vs = scene.viscoscope
+    path = bpy.path.abspath(vs.track_csv) if vs.track_csv else ""
+    if not path or not os.path.isfile(path):
+        raise scene_export.ExportError("measured track CSV not found: %s" % (path or "none chosen"))
+    column = vs.track_column
+    if not column:
+        try:
+            with open(path, encoding="utf-8") as fh:
+                header = fh.readline().strip().split(",")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise scene_export.ExportError("cannot read measured track %s: %s" % (path, exc)) from exc
+        if len(header) < 2:
+            raise scene_export.ExportError("measured track %s: no measured column after time_s in its header" % path)
+        column = header[1].strip()
+    scale = scene.unit_settings.scale_length
+    track = {"csv": path, "column": column, "observable": vs.track_observable,
+             "origin": units.vec_to_metres(vs.track_origin, scale),
+             "band": units.to_metres(vs.track_band, scale), "weight": vs.track_weight}
+    if vs.track_observable == 'front':
+        track["direction"] = list(vs.track_direction)
+    return track
+
+
 def write_job(context, folder):
-    """Export scene + camera and write job.json; returns (its path, a note for the panel or "")."""
+    """Export the scene (and the camera, for a clip) and write job.json; returns (its path, a note
+    for the panel or "")."""
     scene = context.scene
     vs = scene.viscoscope
-    if not vs.video_path:
+    clip = vs.reference_kind in ('CLIP', 'BOTH')
+    film = vs.forward_model == 'thin_film'
+    if clip and not vs.video_path:
         raise scene_export.ExportError("no reference video: load one in the Reference section")
-    video = reference_video(scene)
-    from .camera import scene_camera
     os.makedirs(folder, exist_ok=True)
     scene_dict = scene_export.export_scene(scene, os.path.join(folder, "scene.json"))
-    scene_export.export_camera(scene_camera(context), scene, os.path.join(folder, "blender_camera.json"))
     resolution, note = identify_resolution(scene, scene_dict)
     job = {
         "format": JOB_FORMAT, "version": JOB_VERSION,
         "scene": "scene.json",
-        "camera": "blender_camera.json",
-        # Always the video with the panel's settings, never the preview's masks (which may be stale):
-        # the engine extracts again whenever the video or these settings change.
-        "video": video,
-        "extraction": extraction_settings(scene),
-        "frame_start": scene.frame_start, "frame_end": scene.frame_end,
+        "forward_model": vs.forward_model,
+        "time_offset_s": vs.time_offset,
         # The job's spread s is absolute, searched as ln(1 + s/initial); the panel's is a factor f of η.
         "parameters": [{"name": "viscosity", "initial": vs.eta_initial,
                         "spread": vs.eta_initial * (vs.eta_spread - 1.0),
                         "min": ETA_BOUNDS[0], "max": ETA_BOUNDS[1], "log": True}],
         "resolution": resolution,
         "max_generations": vs.max_generations,
-        "grid_placements": vs.grid_placements,
-        "grid_placement_schedule": vs.placement_schedule,
         "time_budget_s": vs.time_budget_minutes * 60.0,
         "seed": vs.sim_seed,
     }
+    if clip:
+        from .camera import scene_camera
+        scene_export.export_camera(scene_camera(context), scene, os.path.join(folder, "blender_camera.json"))
+        # Always the video with the panel's settings, never the preview's masks (which may be stale):
+        # the engine extracts again whenever the video or these settings change.
+        job.update({"camera": "blender_camera.json", "video": reference_video(scene),
+                    "extraction": extraction_settings(scene),
+                    "frame_start": scene.frame_start, "frame_end": scene.frame_end})
+    if vs.reference_kind in ('TRACK', 'BOTH'):
+        job["track"] = measured_track(scene)
+    if not film:  # the thin film has no grid to place
+        job.update({"grid_placements": vs.grid_placements, "grid_placement_schedule": vs.placement_schedule})
     path = os.path.join(folder, "job.json")
     with written_atomically(path) as fh:
         json.dump(job, fh, indent=1, allow_nan=False)
     return path, note
+
+
+def reference_name(vs):
+    """The reference's file names, as a result records where it came from."""
+    names = []
+    if vs.reference_kind in ('CLIP', 'BOTH'):
+        names.append(bpy.path.basename(vs.video_path))
+    if vs.reference_kind in ('TRACK', 'BOTH'):
+        names.append(bpy.path.basename(vs.track_csv))
+    return " and ".join(names)
 
 
 def bound_doubts(low, high):
@@ -106,7 +147,7 @@ def read_result(context, out_dir):
     doubts = [str(d) for d in result.get("doubts") or ()]  # an older engine writes none
     doubts += bound_doubts(low, high)
     vs.result_eta, vs.result_eta_low, vs.result_eta_high = eta, low, high
-    vs.result_footage = bpy.path.basename(vs.video_path)
+    vs.result_footage = reference_name(vs)
     vs.result_doubts = "\n".join(doubts)
     vs.result_applied = False
     if not doubts:
@@ -161,6 +202,8 @@ class _IdentifyBase(EngineOperator):
         if self.resume and not os.path.isdir(out_dir):
             raise engine.EngineError("nothing to resume: no identification in %s" % out_dir)
         job, self.note = write_job(context, folder)
+        if not self.resume:
+            start_afresh(out_dir)
         return engine.identify_args(exe, job, out_dir, prefs.threads(context)), out_dir
 
     def on_success(self, context, out_dir):

@@ -5,6 +5,7 @@ Operators derive from EngineOperator and implement prepare() (returns the engine
 on_success(). execute() blocks (for scripts and background mode); invoke() returns at once.
 """
 
+import os
 import time
 
 import bpy
@@ -23,6 +24,7 @@ class Running:
         self.out_dir = out_dir
         self.on_success = on_success
         self.scene_name = scene_name
+        self.fit = None  # a diagnosis's (fit number, number of fits)
 
 
 ACTIVE = {}  # kind → Running
@@ -40,6 +42,10 @@ def is_running(kind):
 def describe_progress(event):
     """One status line from a progress event, using whichever fields it has."""
     parts = []
+    if event.get("stage") == "diagnose" and "fit" in event:
+        parts.append("Fit %s/%s: %s" % (event["fit"], event.get("fits", "?"), event.get("model", "")))
+    elif "model" in event:
+        parts.append(str(event["model"]))
     if "generation" in event:
         gen = "Generation %s" % event["generation"]
         if "generations" in event:
@@ -81,6 +87,15 @@ def start(context, kind, args, out_dir, on_success, note=""):
     return job
 
 
+def start_afresh(out_dir):
+    """Forget the checkpoints of an earlier run in out_dir, so that a new run of a changed job starts
+    over (the engine refuses another job's checkpoint) instead of failing; the rest of its files the
+    new run overwrites."""
+    for folder, _dirs, files in os.walk(out_dir):
+        if "checkpoint.json" in files:
+            os.remove(os.path.join(folder, "checkpoint.json"))
+
+
 def cancel(kind):
     running = ACTIVE.get(kind)
     if running is None or running.job.finished:
@@ -99,7 +114,9 @@ def pump(context, kind):
     job = running.job
     for event in job.poll():
         if event.get("event") == "progress":
-            st.progress = 100.0 * engine.progress_fraction(event)
+            if event.get("stage") == "diagnose" and "fit" in event:
+                running.fit = (int(event["fit"]), int(event.get("fits", 1)))
+            st.progress = 100.0 * engine.progress_fraction(event, running.fit)
             st.status = describe_progress(event)
             context.window_manager.progress_update(int(st.progress))
         elif event.get("event") == "warning":
@@ -221,8 +238,8 @@ class VISCOSCOPE_OT_cancel_job(bpy.types.Operator):
     bl_label = "Cancel"
     bl_options = {'INTERNAL'}
 
-    kind: bpy.props.EnumProperty(items=[('identify', "Identify", ""), ('simulate', "Simulate", ""),
-                                        ('extract', "Extract", "")])
+    kind: bpy.props.EnumProperty(items=[('identify', "Identify", ""), ('diagnose', "Diagnose", ""),
+                                        ('simulate', "Simulate", ""), ('extract', "Extract", "")])
 
     def execute(self, context):
         if not cancel(self.kind):

@@ -15,7 +15,7 @@ import conftest
 pytestmark = pytest.mark.gui
 
 PANELS = ["VIEW3D_PT_viscoscope_%s" % n for n in
-          ("reference", "camera", "container", "silhouettes", "identify", "results", "fluid", "transfer")]
+          ("reference", "camera", "container", "silhouettes", "identify", "results", "diagnose", "fluid", "transfer")]
 
 
 def _artifacts(tmp_path):

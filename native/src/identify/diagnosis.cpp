@@ -270,6 +270,7 @@ ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting,
         fit.evaluations = result.evaluations;
         fit.seconds = result.seconds;
     }
+    fit.material = sceneToJson(sceneWithParameters(full, fit.theta, full.resolution)).at("material");
     const std::vector<Job> runs = runsOf(full);
     int fittedFrames = 0;
     runSeries = json::array();
@@ -293,7 +294,8 @@ json toJson(const ModelFit& fit, const json& series) {
         parameters[fit.parameters[i]] = {{"value", fit.theta[i]}, {"interval", fit.interval[i]}};
     json doc{{"model", fit.model},         {"parameters", parameters},   {"fitted_E", fit.fittedE},
              {"held_out_E", fit.heldOutE}, {"whole_E", fit.wholeE},      {"bic", fit.bic},
-             {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"residual_over_time", series}};
+             {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"material", fit.material},
+             {"residual_over_time", series}};
     if (fit.trackError) doc["track_error"] = *fit.trackError;
     return doc;
 }

@@ -50,6 +50,8 @@ struct ModelFit {
     std::optional<double> trackError;  // relative L2 of the measured track over all frames (first run)
     long evaluations = 0;
     double seconds = 0;
+    // The material θ* implies, as a scene file's "material" holds it: what the add-on applies.
+    nlohmann::json material;
 };
 
 struct Diagnosis {

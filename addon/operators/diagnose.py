@@ -1,0 +1,158 @@
+"""Diagnose: run the engine's diagnosis out of process (the same job Identify writes; cancel keeps
+each fit's checkpoint, Resume continues), show its conclusion and figures, and Apply Effect writes
+the chosen model's material into the Fluid Material."""
+
+import json
+import os
+import re
+
+import bpy
+
+from .. import engine, prefs, schema, scene_export
+from .identify import reference_name, write_job
+from .runner import EngineOperator, is_running, start_afresh
+
+DIAGNOSIS_FORMAT = "viscoscope.diagnosis"
+# The engine's "type" of a material model → the Fluid Material's model.
+MODEL_ITEMS = {engine_type: item for item, engine_type in scene_export.MODEL_TYPES.items()}
+
+
+def diagnose_dir(scene):
+    return os.path.join(scene_export.work_dir(scene), "diagnose")
+
+
+def describe_parameter(name, fit):
+    """'K 18.76 Pa·sⁿ [16.01–22.07]' from a parameter's name ("solids[0].width" too) and its fit."""
+    declared = schema.PARAMETERS.get(re.sub(r"^solids\[\d+\]\.", "", name))
+    symbol, unit = (declared["symbol"], declared["unit"]) if declared else (name, "")
+    unit = "" if unit in ("", "1") else " " + unit
+    low, high = fit.get("interval") or (float("nan"), float("nan"))
+    return "%s %.4g%s [%.4g–%.4g]" % (symbol, fit["value"], unit, low, high)
+
+
+def describe_model(entry):
+    """One line of a fitted model: its parameters, its error on the held-out frames, its BIC."""
+    parameters = ", ".join(describe_parameter(name, fit) for name, fit in sorted(entry["parameters"].items()))
+    line = "%s: %s; held-out E %.3g, BIC %.1f" % (entry["model"], parameters or "nothing searched",
+                                                  entry["held_out_E"], entry["bic"])
+    if "track_error" in entry:
+        line += ", track error %.2f %%" % (100 * entry["track_error"])
+    if "earns_its_parameters" in entry:
+        line += "; earns its parameters" if entry["earns_its_parameters"] else "; does not earn its parameters"
+    return line
+
+
+def describe_errors(errors):
+    """'Error before → after: …' per observable the diagnosis compares."""
+    parts = ["E %.3g → %.3g" % (errors["E"]["before"], errors["E"]["after"]),
+             "held-out E %.3g → %.3g" % (errors["held_out_E"]["before"], errors["held_out_E"]["after"])]
+    if "track_error" in errors:
+        parts.append("track %.2f %% → %.2f %%" % (100 * errors["track_error"]["before"],
+                                                  100 * errors["track_error"]["after"]))
+    return "Error before → after: " + "; ".join(parts)
+
+
+def read_diagnosis(context, out_dir):
+    """DIR/diagnosis.json into the Diagnose panel; diagnosis.png as its preview."""
+    path = os.path.join(out_dir, "diagnosis.json")
+    with open(path, encoding="utf-8") as fh:
+        doc = json.load(fh)
+    if not isinstance(doc, dict) or doc.get("format") != DIAGNOSIS_FORMAT:
+        raise ValueError("%s is not a diagnosis (format %r)" % (path, doc.get("format") if isinstance(doc, dict) else None))
+    chosen = doc["chosen"]
+    models = [doc["base"]] + list(doc["candidates"])
+    after = next((m for m in models[1:] if m["model"] == chosen), None) if chosen else doc["base"]
+    if after is None:
+        raise ValueError("%s chose %r, which is not among its candidates" % (path, chosen))
+    lines = [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
+    lines += ["%s not tried: %s" % (n["effect"], n["why"]) for n in doc.get("not_tried", ())]
+    vs = context.scene.viscoscope
+    vs.diagnosis_conclusion = doc["conclusion"]
+    vs.diagnosis_effect = chosen or ""
+    vs.diagnosis_report = "\n".join(lines)
+    vs.diagnosis_material = json.dumps(after["material"]) if chosen else ""
+    vs.diagnosis_source = "%s: %s" % (reference_name(vs), describe_model(after))
+    vs.diagnosis_applied = False
+    png = os.path.join(out_dir, "diagnosis.png")
+    if os.path.isfile(png):
+        img = bpy.data.images.load(png, check_existing=True)
+        img.reload()
+        img.preview_ensure()
+
+
+def apply_material(fluid, material):
+    """The engine's "material" (a scene file's) into the Fluid Material: every declared parameter the
+    panel holds, and the model."""
+    model = material["model"]
+    if model["type"] not in MODEL_ITEMS:
+        raise ValueError("unknown material model %r" % model["type"])
+    for source in (material, model):
+        for name, value in source.items():
+            if name in schema.PARAMETERS and name in fluid.bl_rna.properties:
+                setattr(fluid, name, value)
+    fluid.model = MODEL_ITEMS[model["type"]]
+
+
+class VISCOSCOPE_OT_apply_effect(bpy.types.Operator):
+    """Write the diagnosed model (the chosen effect's law and its fitted parameters) into the Fluid Material"""
+    bl_idname = "viscoscope.apply_effect"
+    bl_label = "Apply Effect"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        vs = context.scene.viscoscope
+        return bool(vs.diagnosis_material) and not vs.diagnosis_applied
+
+    def execute(self, context):
+        vs = context.scene.viscoscope
+        try:
+            apply_material(vs.fluid, json.loads(vs.diagnosis_material))
+        except (ValueError, KeyError, TypeError) as exc:
+            self.report({'ERROR'}, "cannot apply the diagnosis: %s" % exc)
+            return {'CANCELLED'}
+        vs.fluid.identified_from = vs.diagnosis_source  # after η, whose edit clears it
+        vs.diagnosis_applied = True
+        self.report({'INFO'}, "%s applied to the Fluid Material" % vs.diagnosis_effect)
+        return {'FINISHED'}
+
+
+class _DiagnoseBase(EngineOperator):
+    job_kind = "diagnose"
+    resume = False
+
+    @classmethod
+    def poll(cls, context):
+        return not is_running("diagnose")
+
+    def prepare(self, context):
+        exe = prefs.find_engine(context)
+        folder = diagnose_dir(context.scene)
+        out_dir = os.path.join(folder, "out")
+        if self.resume and not os.path.isdir(out_dir):
+            raise engine.EngineError("nothing to resume: no diagnosis in %s" % out_dir)
+        job, self.note = write_job(context, folder)
+        if not self.resume:
+            start_afresh(out_dir)
+        return engine.diagnose_args(exe, job, out_dir, prefs.threads(context)), out_dir
+
+    def on_success(self, context, out_dir):
+        read_diagnosis(context, out_dir)
+
+
+class VISCOSCOPE_OT_diagnose(_DiagnoseBase, bpy.types.Operator):
+    """Find the effect the model lacks: fit the Newtonian model and each candidate effect to the first
+    two thirds of the reference, predict the rest, and keep an effect only if it earns its parameters
+    (runs in the background; Esc cancels)"""
+    bl_idname = "viscoscope.diagnose"
+    bl_label = "Diagnose"
+
+
+class VISCOSCOPE_OT_diagnose_resume(_DiagnoseBase, bpy.types.Operator):
+    """Continue a cancelled diagnosis: each model's fit resumes from its checkpoint"""
+    bl_idname = "viscoscope.diagnose_resume"
+    bl_label = "Resume"
+    resume = True
+
+
+classes = (VISCOSCOPE_OT_diagnose, VISCOSCOPE_OT_diagnose_resume, VISCOSCOPE_OT_apply_effect)
