@@ -130,6 +130,13 @@ class ViscoscopeJobStatus(bpy.types.PropertyGroup):
     can_resume: BoolProperty(default=False)
 
 
+class ViscoscopeRun(bpy.types.PropertyGroup):
+    """Another run of the same liquid: a scene of this file with its own container and reference."""
+    scene: PointerProperty(name="Scene", type=bpy.types.Scene,
+                           description="A scene set up like this one (domain, container or emitter, reference); "
+                                       "its liquid is this scene's Fluid Material")
+
+
 class ViscoscopeCameraPoint(bpy.types.PropertyGroup):
     label: StringProperty(name="Label", default="")
     world: FloatVectorProperty(name="World", subtype='TRANSLATION', unit='LENGTH', size=3)
@@ -157,6 +164,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                           "towards the front")
     track_weight: FloatProperty(name="Weight", default=1.0, min=1e-6,
                                 description="The track's weight in E beside the silhouettes")
+    # Other runs of this liquid, fitted together with this scene's reference (the job's "runs").
+    runs: CollectionProperty(type=ViscoscopeRun)
+    runs_index: IntProperty(default=0)
     time_offset: FloatProperty(name="Time Offset", unit='TIME_ABSOLUTE', default=0.0,
                                description="Simulation time at the reference's time 0 (footage or CSV)")
     forward_model: EnumProperty(name="Forward Model", items=FORWARD_MODEL_ITEMS, default='simulation')
@@ -244,12 +254,16 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     simulate_job: PointerProperty(type=ViscoscopeJobStatus)
     extract_job: PointerProperty(type=ViscoscopeJobStatus)
     diagnose_job: PointerProperty(type=ViscoscopeJobStatus)
+    calibrate_job: PointerProperty(type=ViscoscopeJobStatus)
+    # The last Mantaflow calibration (operators/mantaflow_calibration.read_calibration), JSON.
+    mantaflow_calibration: StringProperty(default="")
 
 
 classes = (
     ViscoscopeObjectSettings,
     ViscoscopeFluid,
     ViscoscopeJobStatus,
+    ViscoscopeRun,
     ViscoscopeCameraPoint,
     ViscoscopeSceneSettings,
 )

@@ -135,8 +135,9 @@ def material_dict(fluid):
     return material
 
 
-def build_scene(scene, scene_dir, objects=None, depsgraph=None):
-    """The scene dict; mesh solids are written as OBJ files into scene_dir."""
+def build_scene(scene, scene_dir, objects=None, depsgraph=None, fluid=None):
+    """The scene dict; mesh solids are written as OBJ files into scene_dir. `fluid` (default the
+    scene's own Fluid Material) is the material: another run of one liquid takes the first run's."""
     vs = scene.viscoscope
     if bpy.context.scene == scene:
         bpy.context.view_layer.update()  # matrix_world of objects moved by scripts
@@ -215,7 +216,7 @@ def build_scene(scene, scene_dir, objects=None, depsgraph=None):
                    "periodic": [False, False, False]},
         "solids": solids,
         "liquids": liquids,
-        "material": material_dict(vs.fluid),
+        "material": material_dict(fluid or vs.fluid),
         "gravity": gravity,  # m/s²: physical, not rescaled with the unit scale
         "fps": fps,
         "frames": int(vs.sim_frames),
@@ -225,9 +226,9 @@ def build_scene(scene, scene_dir, objects=None, depsgraph=None):
     }
 
 
-def export_scene(scene, path, objects=None):
+def export_scene(scene, path, objects=None, fluid=None):
     """Write the scene JSON to path and return the dict."""
-    data = build_scene(scene, os.path.dirname(os.path.abspath(path)), objects)
+    data = build_scene(scene, os.path.dirname(os.path.abspath(path)), objects, fluid=fluid)
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     with written_atomically(path) as fh:
         json.dump(data, fh, indent=1, allow_nan=False)

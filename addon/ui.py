@@ -83,6 +83,31 @@ def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
         draw_message(col, context, st.error, icon='ERROR', alert=True)
 
 
+REFERENCE_KINDS = {'CLIP': "clip", 'TRACK': "measured track", 'BOTH': "clip and track"}
+
+
+def draw_runs(layout, context):
+    """Other runs of this liquid: which scenes the job fits, and what each is compared with."""
+    vs = context.scene.viscoscope
+    col = layout.column(align=True)
+    col.label(text="Other Runs of This Liquid")
+    row = col.row()
+    row.template_list("VISCOSCOPE_UL_runs", "", vs, "runs", vs, "runs_index", rows=2)
+    buttons = row.column(align=True)
+    buttons.operator("viscoscope.add_run", text="", icon='ADD')
+    buttons.operator("viscoscope.remove_run", text="", icon='REMOVE')
+    if vs.runs:
+        names = ["%s (%s)" % (s.name, REFERENCE_KINDS[s.viscoscope.reference_kind])
+                 for s in [context.scene] + [r.scene for r in vs.runs if r.scene is not None]]
+        draw_message(col, context, "Identify and Diagnose fit %d runs sharing this Fluid Material: %s"
+                     % (len(names), ", ".join(names)), icon='INFO')
+
+
+class VISCOSCOPE_UL_runs(bpy.types.UIList):
+    def draw_item(self, _context, layout, _data, item, _icon, _active_data, _active_propname, _index):
+        layout.prop(item, "scene", text="")
+
+
 class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
     bl_label = "Reference"
 
@@ -115,6 +140,7 @@ class VIEW3D_PT_viscoscope_reference(_ViscoscopePanel, bpy.types.Panel):
             if vs.reference_kind == 'BOTH':
                 col.prop(vs, "track_weight")
         layout.prop(vs, "time_offset")
+        draw_runs(layout, context)
         draw_labelled(layout, vs, "work_dir")
 
 
@@ -317,6 +343,8 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
         col.prop(fluid, "roughness")
         col.prop(fluid, "transmission")
         layout.operator("viscoscope.apply_to_domain", icon='MOD_FLUIDSIM')
+        from .operators.mantaflow_calibration import draw_calibration
+        draw_calibration(layout, context)
 
 
 class VIEW3D_PT_viscoscope_transfer(_ViscoscopePanel, bpy.types.Panel):
@@ -335,6 +363,7 @@ class VIEW3D_PT_viscoscope_transfer(_ViscoscopePanel, bpy.types.Panel):
 
 classes = (
     VISCOSCOPE_UL_points,
+    VISCOSCOPE_UL_runs,
     VIEW3D_PT_viscoscope_reference,
     VIEW3D_PT_viscoscope_camera,
     VIEW3D_PT_viscoscope_container,

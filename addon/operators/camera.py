@@ -11,9 +11,9 @@ from .. import camera_math, engine, prefs, scene_export
 from ..atomic_files import written_atomically
 
 
-def scene_camera(context):
-    vs = context.scene.viscoscope
-    cam = vs.camera or context.scene.camera
+def scene_camera(scene):
+    vs = scene.viscoscope
+    cam = vs.camera or scene.camera
     if cam is None or cam.type != 'CAMERA':
         raise scene_export.ExportError("no camera: choose one in the Camera section")
     return cam
@@ -70,7 +70,7 @@ class VISCOSCOPE_OT_export_camera(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            cam = scene_camera(context)
+            cam = scene_camera(context.scene)
             folder = scene_export.work_dir(context.scene)
             path = os.path.join(folder, "blender_camera.json")
             scene_export.export_camera(cam, context.scene, path)
@@ -125,7 +125,7 @@ class VISCOSCOPE_OT_match_camera(bpy.types.Operator):
         try:
             if len(vs.points) < 4:
                 raise scene_export.ExportError("mark at least 4 points, %d marked" % len(vs.points))
-            cam = scene_camera(context)
+            cam = scene_camera(context.scene)
             size = tuple(vs.clip.size) if vs.clip else camera_math.render_size(scene_export.camera_dict(cam, scene))
             check_points_in_image(vs.points, size)
             exe = prefs.find_engine(context)

@@ -71,7 +71,7 @@ def read_diagnosis(context, out_dir):
     vs.diagnosis_effect = chosen or ""
     vs.diagnosis_report = "\n".join(lines)
     vs.diagnosis_material = json.dumps(after["material"]) if chosen else ""
-    vs.diagnosis_source = "%s: %s; %s" % (reference_name(vs), describe_model(after), describe_errors(doc["errors"]))
+    vs.diagnosis_source = "%s: %s; %s" % (reference_name(context.scene), describe_model(after), describe_errors(doc["errors"]))
     vs.diagnosis_applied = False
     png = os.path.join(out_dir, "diagnosis.png")
     if os.path.isfile(png):

@@ -34,10 +34,10 @@ def needed_resolution(scene_dict):
     return max((math.ceil(MIN_HOLE_CELLS * extent / (2 * r) - 1e-9) for r in holes), default=0)
 
 
-def identify_resolution(scene, scene_dict):
-    """(resolution for the job, note): the panel's, raised to what the cup's hole needs."""
+def identify_resolution(scene, scene_dicts):
+    """(resolution for the job, note): the panel's, raised to what every run's cup hole needs."""
     asked = scene.viscoscope.identify_resolution
-    needed = needed_resolution(scene_dict)
+    needed = max(needed_resolution(d) for d in scene_dicts)
     if needed <= asked:
         return asked, ""
     return needed, "Resolution %d used: the cup's hole needs %.1f cells across" % (needed, MIN_HOLE_CELLS)
@@ -68,23 +68,59 @@ def measured_track(scene):
     return track
 
 
+def run_scenes(scene):
+    """The scenes whose references the job fits: this one, then the other runs of its liquid."""
+    scenes = [scene]
+    for k, run in enumerate(scene.viscoscope.runs):
+        if run.scene is None:
+            raise scene_export.ExportError("run %d has no scene: choose one or remove it" % (k + 2))
+        if run.scene in scenes:
+            raise scene_export.ExportError("scene '%s' is a run twice" % run.scene.name)
+        scenes.append(run.scene)
+    return scenes
+
+
+def run_entry(scene, folder, prefix, fluid):
+    """One run's keys of a job (its scene; its clip's camera, video and extraction, its measured
+    track), with its files written into folder under names starting with prefix; and its scene dict.
+    The material is `fluid`, which all runs of one liquid share."""
+    vs = scene.viscoscope
+    clip = vs.reference_kind in ('CLIP', 'BOTH')
+    if clip and not vs.video_path:
+        raise scene_export.ExportError("no reference video: load one in the Reference section")
+    scene_dict = scene_export.export_scene(scene, os.path.join(folder, prefix + "scene.json"), fluid=fluid)
+    entry = {"scene": prefix + "scene.json", "time_offset_s": vs.time_offset}
+    if clip:
+        from .camera import scene_camera
+        scene_export.export_camera(scene_camera(scene), scene, os.path.join(folder, prefix + "blender_camera.json"))
+        # Always the video with the panel's settings, never the preview's masks (which may be stale):
+        # the engine extracts again whenever the video or these settings change.
+        entry.update({"camera": prefix + "blender_camera.json", "video": reference_video(scene),
+                      "extraction": extraction_settings(scene),
+                      "frame_start": scene.frame_start, "frame_end": scene.frame_end})
+    if vs.reference_kind in ('TRACK', 'BOTH'):
+        entry["track"] = measured_track(scene)
+    return entry, scene_dict
+
+
 def write_job(context, folder):
-    """Export the scene (and the camera, for a clip) and write job.json; returns (its path, a note
+    """Export every run's scene (and camera, for a clip) and write job.json; returns (its path, a note
     for the panel or "")."""
     scene = context.scene
     vs = scene.viscoscope
-    clip = vs.reference_kind in ('CLIP', 'BOTH')
-    film = vs.forward_model == 'thin_film'
-    if clip and not vs.video_path:
-        raise scene_export.ExportError("no reference video: load one in the Reference section")
     os.makedirs(folder, exist_ok=True)
-    scene_dict = scene_export.export_scene(scene, os.path.join(folder, "scene.json"))
-    resolution, note = identify_resolution(scene, scene_dict)
+    entries, scene_dicts = [], []
+    for k, run in enumerate(run_scenes(scene)):
+        try:
+            entry, scene_dict = run_entry(run, folder, "run%d_" % k if k else "", vs.fluid)
+        except scene_export.ExportError as exc:
+            raise scene_export.ExportError("run '%s': %s" % (run.name, exc) if k else str(exc)) from exc
+        entries.append(entry)
+        scene_dicts.append(scene_dict)
+    resolution, note = identify_resolution(scene, scene_dicts)
     job = {
         "format": JOB_FORMAT, "version": JOB_VERSION,
-        "scene": "scene.json",
         "forward_model": vs.forward_model,
-        "time_offset_s": vs.time_offset,
         # The job's spread s is absolute, searched as ln(1 + s/initial); the panel's is a factor f of η.
         "parameters": [{"name": "viscosity", "initial": vs.eta_initial,
                         "spread": vs.eta_initial * (vs.eta_spread - 1.0),
@@ -94,17 +130,11 @@ def write_job(context, folder):
         "time_budget_s": vs.time_budget_minutes * 60.0,
         "seed": vs.sim_seed,
     }
-    if clip:
-        from .camera import scene_camera
-        scene_export.export_camera(scene_camera(context), scene, os.path.join(folder, "blender_camera.json"))
-        # Always the video with the panel's settings, never the preview's masks (which may be stale):
-        # the engine extracts again whenever the video or these settings change.
-        job.update({"camera": "blender_camera.json", "video": reference_video(scene),
-                    "extraction": extraction_settings(scene),
-                    "frame_start": scene.frame_start, "frame_end": scene.frame_end})
-    if vs.reference_kind in ('TRACK', 'BOTH'):
-        job["track"] = measured_track(scene)
-    if not film:  # the thin film has no grid to place
+    if len(entries) == 1:
+        job.update(entries[0])
+    else:
+        job["runs"] = entries
+    if vs.forward_model != 'thin_film':  # the thin film has no grid to place
         job.update({"grid_placements": vs.grid_placements, "grid_placement_schedule": vs.placement_schedule})
     path = os.path.join(folder, "job.json")
     with written_atomically(path) as fh:
@@ -112,13 +142,15 @@ def write_job(context, folder):
     return path, note
 
 
-def reference_name(vs):
-    """The reference's file names, as a result records where it came from."""
+def reference_name(scene):
+    """The references' file names, every run's, as a result records where it came from."""
     names = []
-    if vs.reference_kind in ('CLIP', 'BOTH'):
-        names.append(bpy.path.basename(vs.video_path))
-    if vs.reference_kind in ('TRACK', 'BOTH'):
-        names.append(bpy.path.basename(vs.track_csv))
+    for run in run_scenes(scene):
+        vs = run.viscoscope
+        if vs.reference_kind in ('CLIP', 'BOTH'):
+            names.append(bpy.path.basename(vs.video_path))
+        if vs.reference_kind in ('TRACK', 'BOTH'):
+            names.append(bpy.path.basename(vs.track_csv))
     return " and ".join(names)
 
 
@@ -147,7 +179,7 @@ def read_result(context, out_dir):
     doubts = [str(d) for d in result.get("doubts") or ()]  # an older engine writes none
     doubts += bound_doubts(low, high)
     vs.result_eta, vs.result_eta_low, vs.result_eta_high = eta, low, high
-    vs.result_footage = reference_name(vs)
+    vs.result_footage = reference_name(context.scene)
     vs.result_doubts = "\n".join(doubts)
     vs.result_applied = False
     if not doubts:

@@ -69,4 +69,37 @@ class VISCOSCOPE_OT_load_video(bpy.types.Operator, ImportHelper):
         return {'FINISHED'}
 
 
-classes = (VISCOSCOPE_OT_load_video,)
+class VISCOSCOPE_OT_add_run(bpy.types.Operator):
+    """Fit another run of this liquid together with this scene's: a scene of this file with its own
+    container and reference (another volume, lock height or flux), sharing this Fluid Material"""
+    bl_idname = "viscoscope.add_run"
+    bl_label = "Add Run"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        vs = context.scene.viscoscope
+        taken = {context.scene} | {run.scene for run in vs.runs}
+        run = vs.runs.add()
+        run.scene = next((s for s in bpy.data.scenes if s not in taken), None)
+        vs.runs_index = len(vs.runs) - 1
+        return {'FINISHED'}
+
+
+class VISCOSCOPE_OT_remove_run(bpy.types.Operator):
+    """Fit without the selected run"""
+    bl_idname = "viscoscope.remove_run"
+    bl_label = "Remove Run"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return len(context.scene.viscoscope.runs) > 0
+
+    def execute(self, context):
+        vs = context.scene.viscoscope
+        vs.runs.remove(min(vs.runs_index, len(vs.runs) - 1))
+        vs.runs_index = max(0, min(vs.runs_index, len(vs.runs) - 1))
+        return {'FINISHED'}
+
+
+classes = (VISCOSCOPE_OT_load_video, VISCOSCOPE_OT_add_run, VISCOSCOPE_OT_remove_run)

@@ -30,8 +30,8 @@ INTERVAL = 4.0    # s between the track's samples
 SAMPLES = 30
 
 
-def _huppert_radius(t):
-    return 0.715 * (9.81 * FLUX ** 3 / (3 * ETA / DENSITY)) ** 0.125 * t ** 0.5
+def _huppert_radius(t, flux=FLUX):
+    return 0.715 * (9.81 * flux ** 3 / (3 * ETA / DENSITY)) ** 0.125 * t ** 0.5
 
 
 def _write_track(path, radius_at):
@@ -43,26 +43,31 @@ def _write_track(path, radius_at):
     return path
 
 
-def _film_scene(ctx, track_csv, cells=150, generations=12):
-    """A ground plane, a hole pumping FLUX up through it at the origin, the panel set to fit the
+def _add_object(scene, name, role, location=(0.0, 0.0, 0.0), corners=None):
+    data = None
+    if corners is not None:
+        data = bpy.data.meshes.new(name)
+        data.from_pydata([(x, y, z) for x in corners[0] for y in corners[1] for z in corners[2]], [], [])
+    obj = bpy.data.objects.new(name, data)
+    obj.location = location
+    scene.collection.objects.link(obj)
+    obj.viscoscope.role = role
+    return obj
+
+
+def _film_scene(scene, track_csv, cells=150, generations=12, flux=FLUX):
+    """A ground plane, a hole pumping `flux` up through it at the origin, the panel set to fit the
     measured radius with the thin film on `cells` cells across the domain."""
-    scene = ctx.scene
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 0.02))
-    domain = ctx.active_object
-    domain.scale = (0.3, 0.3, 0.06)
-    domain.viscoscope.role = 'DOMAIN'
-    bpy.ops.object.empty_add(location=(0.0, 0.0, 0.0))
-    ctx.active_object.viscoscope.role = 'GROUND'
-    bpy.ops.object.empty_add(location=(0.0, 0.0, 0.0))
-    emitter = ctx.active_object.viscoscope
-    emitter.role = 'EMITTER'
-    emitter.emitter_radius, emitter.emitter_flux = HOLE, FLUX
+    _add_object(scene, "Domain", 'DOMAIN', corners=((-0.15, 0.15), (-0.15, 0.15), (-0.01, 0.05)))
+    _add_object(scene, "Ground", 'GROUND')
+    emitter = _add_object(scene, "Hole", 'EMITTER').viscoscope
+    emitter.emitter_radius, emitter.emitter_flux = HOLE, flux
     emitter.emitter_start, emitter.emitter_end = 0.0, 1e4
     scene.render.fps, scene.render.fps_base = 1, INTERVAL  # a simulation frame per sample
+    scene.use_gravity, scene.gravity = True, (0.0, 0.0, -9.81)
     vs = scene.viscoscope
     vs.sim_frames = SAMPLES + 1
     vs.sim_resolution = cells
-    vs.cup = None
     vs.fluid.density = DENSITY
     vs.reference_kind = 'TRACK'
     vs.track_csv = track_csv
@@ -85,7 +90,7 @@ def forget_plots(tmp_work):
 def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp_work, engine_path, use_engine,
                                                                         monkeypatch):
     use_engine(engine_path)
-    _film_scene(ctx, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
+    _film_scene(ctx.scene, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
     vs = ctx.scene.viscoscope
     out_dir = os.path.join(diagnose_dir(ctx.scene), "out")
 
@@ -152,7 +157,7 @@ def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_w
     # 1 mm cells and 30 generations: on 2 mm cells the film's steep power-law front fits n = 0.58,
     # and with 12 generations a Bingham liquid predicted the held-out third better than an
     # unconverged power law (tests/bench/FINDINGS.md, "Diagnose in the panel").
-    _film_scene(ctx, _write_track(os.path.join(str(tmp_work), "thinning.csv"), power_law_radius),
+    _film_scene(ctx.scene, _write_track(os.path.join(str(tmp_work), "thinning.csv"), power_law_radius),
                 cells=300, generations=30)
     vs = ctx.scene.viscoscope
     out_dir = os.path.join(diagnose_dir(ctx.scene), "out")
@@ -192,7 +197,7 @@ def test_identify_on_a_measured_track_and_again_after_a_change(ctx, tmp_work, en
     """Identify a measured track alone; a second Identify of a changed job starts afresh instead of
     being refused the first run's checkpoint."""
     use_engine(engine_path)
-    _film_scene(ctx, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
+    _film_scene(ctx.scene, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
     vs = ctx.scene.viscoscope
     assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'FINISHED'}, vs.identify_job.error
     first = vs.result_eta
@@ -205,7 +210,40 @@ def test_identify_on_a_measured_track_and_again_after_a_change(ctx, tmp_work, en
 
 def test_a_missing_track_is_one_clear_line(ctx, tmp_work, engine_path, use_engine):
     use_engine(engine_path)
-    _film_scene(ctx, os.path.join(str(tmp_work), "nowhere.csv"))
+    _film_scene(ctx.scene, os.path.join(str(tmp_work), "nowhere.csv"))
     with pytest.raises(RuntimeError, match="measured track CSV not found: .*nowhere.csv"):
         bpy.ops.viscoscope.diagnose('EXEC_DEFAULT')
     assert "nowhere.csv" in ctx.scene.viscoscope.diagnose_job.error
+
+
+def test_two_runs_of_one_liquid_are_fitted_together(ctx, tmp_work, engine_path, use_engine, request):
+    """A second scene pumping twice the flux is another run of the same liquid: the job holds both,
+    each with its own scene and track and the first scene's material, and Identify fits them together."""
+    use_engine(engine_path)
+    work = str(tmp_work)
+    _film_scene(ctx.scene, _write_track(os.path.join(work, "slow.csv"), _huppert_radius))
+    other = bpy.data.scenes.new("Fast pour")
+    request.addfinalizer(lambda: bpy.data.scenes.remove(other))
+    _film_scene(other, _write_track(os.path.join(work, "fast.csv"), lambda t: _huppert_radius(t, 2 * FLUX)),
+                flux=2 * FLUX)
+    other.viscoscope.fluid.density = 1400.0  # not what the job uses: the runs share the first scene's liquid
+    vs = ctx.scene.viscoscope
+    assert bpy.ops.viscoscope.add_run() == {'FINISHED'}
+    assert vs.runs[0].scene == other
+    assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'FINISHED'}, vs.identify_job.error
+    folder = os.path.join(scene_export.work_dir(ctx.scene), "identify")
+    job = json.load(open(os.path.join(folder, "job.json")))
+    assert [r["scene"] for r in job["runs"]] == ["scene.json", "run1_scene.json"]
+    assert [os.path.basename(r["track"]["csv"]) for r in job["runs"]] == ["slow.csv", "fast.csv"]
+    assert "scene" not in job and "track" not in job
+    second = json.load(open(os.path.join(folder, "run1_scene.json")))
+    assert second["material"]["density"] == DENSITY and second["liquids"][0]["flux"] == pytest.approx(2 * FLUX)
+    result = json.load(open(os.path.join(folder, "out", "result.json")))
+    assert len(result["run_E"]) == 2
+    assert 0.7 * ETA < vs.result_eta < 1.5 * ETA
+    assert vs.result_footage == "slow.csv and fast.csv"
+
+    # A run without a scene is one clear line, before the engine starts.
+    vs.runs.add()
+    with pytest.raises(RuntimeError, match="run 3 has no scene"):
+        bpy.ops.viscoscope.identify('EXEC_DEFAULT')

@@ -203,7 +203,7 @@ def test_identify_resolution_meets_the_engines_need_for_the_cup(ctx, tmp_work, e
     _cup_scene(ctx, 1.0)
     vs = ctx.scene.viscoscope
     data = scene_export.build_scene(ctx.scene, str(tmp_work))
-    resolution, note = identify.identify_resolution(ctx.scene, data)
+    resolution, note = identify.identify_resolution(ctx.scene, [data])
     assert resolution > vs.identify_resolution and str(resolution) in note
     for res, warned in ((resolution, False), (resolution - 1, True)):
         vs.sim_resolution = res
@@ -212,7 +212,7 @@ def test_identify_resolution_meets_the_engines_need_for_the_cup(ctx, tmp_work, e
         warnings = _engine_warnings(engine_path, path)
         assert any("hole" in w for w in warnings) is warned, (res, warnings)
     vs.identify_resolution = resolution + 4  # a finer grid than needed is kept as asked
-    assert identify.identify_resolution(ctx.scene, data) == (resolution + 4, "")
+    assert identify.identify_resolution(ctx.scene, [data]) == (resolution + 4, "")
 
 
 def _files(folder):
