@@ -3,11 +3,14 @@
 
 Top, per run: the residual over time of the base fit and of the chosen effect (the measured track
 against each simulation, or each frame's silhouette E), the fitted frames left of the dashed line
-and the predicted ones right of it. Bottom: every model's E over the fitted and the held-out frames.
+and the predicted ones right of it. Then every model's E over the fitted and the held-out frames.
+Bottom: the landscape of the chosen effect's new parameters (the base's, when none is chosen): E
+over the fitted frames at every evaluation of its fit (OUT/fits/<model>/evaluations.csv), θ* marked.
 
 Usage: /usr/bin/python3 scripts/plot_diagnosis.py OUT
 Needs matplotlib (Debian: python3-matplotlib). `viscoscope diagnose` calls this script itself.
 """
+import csv
 import json
 import os
 import sys
@@ -29,15 +32,36 @@ def series_lines(ax, series, label, style):
         ax.set_ylabel("silhouette E per frame")
 
 
+def landscape(ax, evaluations, name, best):
+    """E against one parameter over a fit's evaluations, log-log, the fit's value marked."""
+    points = [(float(e[name]), float(e["E"])) for e in evaluations if e.get(name) and e.get("E")]
+    ax.plot([p[0] for p in points], [p[1] for p in points], "o", alpha=0.5)
+    ax.axvline(best, color="tab:red", linestyle="--", label="fit %.4g" % best)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel(name)
+    ax.set_ylabel("E (fitted frames)")
+    ax.legend()
+
+
 def main(out_dir):
     with open(os.path.join(out_dir, "diagnosis.json"), encoding="utf-8") as fh:
         diagnosis = json.load(fh)
     base = diagnosis["base"]
     chosen = next((c for c in diagnosis["candidates"] if c["model"] == diagnosis["chosen"]), None)
     runs = len(base["residual_over_time"])
-    fig, axes = plt.subplots(runs + 1, 1, figsize=(7, 3 * (runs + 1)))
+    shown = chosen or base
+    new = [n for n in shown["parameters"] if chosen is None or n not in base["parameters"]]
+    path = os.path.join(out_dir, "fits", "base" if chosen is None else chosen["model"], "evaluations.csv")
+    evaluations = []
+    if new and os.path.isfile(path):
+        with open(path, encoding="utf-8", newline="") as fh:
+            evaluations = list(csv.DictReader(fh))
+    columns = max(1, len(new))
+    fig = plt.figure(figsize=(7, 3 * (runs + 1 + bool(evaluations))))
+    grid = fig.add_gridspec(runs + 1 + bool(evaluations), columns)
     for r in range(runs):
-        ax = axes[r]
+        ax = fig.add_subplot(grid[r, :])
         series_lines(ax, base["residual_over_time"][r], "base (before)", "o-")
         if chosen:
             series_lines(ax, chosen["residual_over_time"][r], chosen["model"] + " (after)", "s-")
@@ -48,7 +72,7 @@ def main(out_dir):
         ax.set_xlabel("time (s)")
         ax.set_title(f"run {r + 1}: {diagnosis['conclusion']}")
         ax.legend()
-    ax = axes[-1]
+    ax = fig.add_subplot(grid[runs, :])
     models = [base] + diagnosis["candidates"]
     x = range(len(models))
     ax.bar([i - 0.2 for i in x], [m["fitted_E"] for m in models], width=0.4, label="fitted frames")
@@ -58,6 +82,10 @@ def main(out_dir):
     ax.set_yscale("log")
     ax.set_ylabel("E")
     ax.legend()
+    for k, name in enumerate(new if evaluations else []):
+        ax = fig.add_subplot(grid[runs + 1, k])
+        landscape(ax, evaluations, name, shown["parameters"][name]["value"])
+        ax.set_title(f"{shown['model']}: {name}", fontsize=10)
     fig.tight_layout()
     fig.savefig(os.path.join(out_dir, "diagnosis.png"), dpi=100)
 
