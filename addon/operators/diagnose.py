@@ -66,6 +66,11 @@ def read_diagnosis(context, out_dir):
         raise ValueError("%s chose %r, which is not among its candidates" % (path, chosen))
     lines = [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
     lines += ["%s not tried: %s" % (n["effect"], n["why"]) for n in doc.get("not_tried", ())]
+    geometry = [name for name in after["parameters"] if name.startswith("solids[")] if chosen else []
+    if geometry:
+        lines.append("%s is geometry, not a property of the liquid: Apply Effect writes the material fitted "
+                     "with it; scenes that should show the effect need the solid too (%s)"
+                     % (chosen, ", ".join(describe_parameter(n, after["parameters"][n]) for n in geometry)))
     vs = context.scene.viscoscope
     vs.diagnosis_conclusion = doc["conclusion"]
     vs.diagnosis_effect = chosen or ""
