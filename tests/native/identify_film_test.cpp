@@ -170,6 +170,12 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
         for (size_t i = 0; i < after.parameters.size(); ++i)
             if (const auto truth = hidden.truth.find(after.parameters[i]); truth != hidden.truth.end())
                 EXPECT_NEAR(after.theta[i] / truth->second, 1.0, 0.25) << hidden.expected << " " << after.parameters[i];
+        // Each candidate also scores its base-equivalent point (n = 1, τ_y and the slip length at
+        // their least), so none fits its own frames worse than the base does; a power law at n = 1
+        // is the base itself.
+        for (const identify::ModelFit& candidate : d.candidates)
+            EXPECT_LE(candidate.fittedE, (candidate.model == "shear_thinning" ? 1 + 1e-9 : 1.02) * d.base.fittedE)
+                << hidden.expected << ": " << candidate.model;
     }
     fs::remove_all(root);
 }

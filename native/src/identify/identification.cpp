@@ -261,6 +261,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                 origins.back() = "parabola";
             }
         }
+        const size_t sampled = xs.size();
+        if (g == state.coarseEnd && !options.knownPoint.empty()) {
+            if (options.knownPoint.size() != size_t(n))
+                throw std::logic_error("identify: the known point has " + std::to_string(options.knownPoint.size()) +
+                                       " parameters, the job searches " + std::to_string(n));
+            xs.push_back(Eigen::Map<const Eigen::VectorXd>(options.knownPoint.data(), n).array().log().matrix());
+            origins.push_back("known");
+        }
         const bool stageFields = writeFields && !coarse;
         fields.clearStaging();
         EvaluationBatch batch{{}, coarse, plan.resolution(fidelity), placementShift(g), {}};
@@ -302,7 +310,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                     fields.promote(k, evals[k], batch.gridShift);
             fields.clearStaging();
         }
-        es.tell(xs, fitness);
+        es.tell({xs.begin(), xs.begin() + sampled}, {fitness.begin(), fitness.begin() + sampled});
         if (scan) es.restart(xs[bestK], Eigen::VectorXd::Constant(1, std::max(0.5 * (xs[1][0] - xs[0][0]), 1e-6)));
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         budget.addGeneration(fidelity, genSeconds);

@@ -53,6 +53,9 @@ struct IdentifyOptions {
     std::function<void(const GenerationReport&)> onGeneration;
     std::function<void(const std::string&)> onWarning;  // a result the user should doubt, and why
     bool writeFields = true;  // θ*'s simulation, every frame as .vdb, into OUT/fields
+    // θ scored beside the first full-fidelity generation's samples (not told to CMA-ES), so that
+    // the search ends no worse than it: a diagnosis's candidate at its base-equivalent point.
+    std::vector<double> knownPoint;
 };
 
 // Runs (or resumes from OUT/checkpoint.json) the identification and writes OUT/result.json,
