@@ -368,6 +368,13 @@ def progress_fraction(event, fit=None):
         return min(max((number - 1 + progress_fraction(event)) / count, 0.0), 1.0) if count > 0 else 0.0
     if not event:
         return 0.0
+    if "bake" in event and "bakes" in event:  # a calibration: each bake an equal share, frames within it
+        try:
+            bake, bakes = float(event["bake"]), float(event["bakes"])
+        except (TypeError, ValueError):
+            return 0.0
+        inner = progress_fraction({k: v for k, v in event.items() if k not in ("bake", "bakes")})
+        return min(max((bake - 1 + inner) / bakes, 0.0), 1.0) if bakes > 0 else 0.0
     for num, den in (("frame", "frames"), ("generation", "generations")):
         try:
             n, d = float(event[num]), float(event[den])

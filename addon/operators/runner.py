@@ -42,6 +42,11 @@ def is_running(kind):
 def describe_progress(event):
     """One status line from a progress event, using whichever fields it has."""
     parts = []
+    if "bake" in event:  # a Mantaflow calibration
+        parts.append("Bake %s/%s: viscosity_value %.4g" % (event["bake"], event.get("bakes", "?"),
+                                                           float(event.get("viscosity_value", 0.0))))
+        if event.get("stage") == "score":
+            parts.append("scoring")
     if event.get("stage") == "diagnose" and "fit" in event:
         parts.append("Fit %s/%s: %s" % (event["fit"], event.get("fits", "?"), event.get("model", "")))
     elif "model" in event:
@@ -60,6 +65,8 @@ def describe_progress(event):
         parts.append(frame)
     if "best_eta" in event:
         parts.append("best η %.4g Pa·s" % float(event["best_eta"]))
+    if "best_value" in event:
+        parts.append("best %.4g" % float(event["best_value"]))
     if "best_E" in event:
         parts.append("best E %.4g" % float(event["best_E"]))
     if "time" in event and "best_eta" not in event:
@@ -239,7 +246,8 @@ class VISCOSCOPE_OT_cancel_job(bpy.types.Operator):
     bl_options = {'INTERNAL'}
 
     kind: bpy.props.EnumProperty(items=[('identify', "Identify", ""), ('diagnose', "Diagnose", ""),
-                                        ('simulate', "Simulate", ""), ('extract', "Extract", "")])
+                                        ('simulate', "Simulate", ""), ('extract', "Extract", ""),
+                                        ('calibrate', "Calibrate", "")])
 
     def execute(self, context):
         if not cancel(self.kind):
