@@ -8,9 +8,8 @@ import re
 
 import bpy
 
-from .. import engine, prefs, schema, scene_export
-from .identify import reference_name, write_job
-from .runner import EngineOperator, is_running, start_afresh
+from .. import engine, schema, scene_export
+from .identify import JobOperator, reference_name
 
 DIAGNOSIS_FORMAT = "viscoscope.diagnosis"
 # The engine's "type" of a material model → the Fluid Material's model.
@@ -122,24 +121,12 @@ class VISCOSCOPE_OT_apply_effect(bpy.types.Operator):
         return {'FINISHED'}
 
 
-class _DiagnoseBase(EngineOperator):
+class _DiagnoseBase(JobOperator):
     job_kind = "diagnose"
-    resume = False
+    run_name = "diagnosis"
 
-    @classmethod
-    def poll(cls, context):
-        return not is_running("diagnose")
-
-    def prepare(self, context):
-        exe = prefs.find_engine(context)
-        folder = diagnose_dir(context.scene)
-        out_dir = os.path.join(folder, "out")
-        if self.resume and not os.path.isdir(out_dir):
-            raise engine.EngineError("nothing to resume: no diagnosis in %s" % out_dir)
-        job, self.note = write_job(context, folder)
-        if not self.resume:
-            start_afresh(out_dir)
-        return engine.diagnose_args(exe, job, out_dir, prefs.threads(context)), out_dir
+    folder = staticmethod(diagnose_dir)
+    engine_args = staticmethod(engine.diagnose_args)
 
     def on_success(self, context, out_dir):
         read_diagnosis(context, out_dir)

@@ -219,24 +219,37 @@ class VISCOSCOPE_OT_apply_result(bpy.types.Operator):
         return {'FINISHED'}
 
 
-class _IdentifyBase(EngineOperator):
-    job_kind = "identify"
+class JobOperator(EngineOperator):
+    """Writes the panel's job into folder(scene) and runs one engine command on it into its out/ (a
+    fresh run forgets the earlier run's checkpoints; Resume goes on from them)."""
     resume = False
+    run_name = ""  # what the command makes, as "nothing to resume: no … in DIR" names it
 
     @classmethod
     def poll(cls, context):
-        return not is_running("identify")
+        return not is_running(cls.job_kind)
+
+    folder = None  # staticmethod(scene → the folder of the job and its out/)
+    engine_args = None  # staticmethod(exe, job, out_dir, threads → the engine's arguments)
 
     def prepare(self, context):
         exe = prefs.find_engine(context)
-        folder = identify_dir(context.scene)
+        folder = self.folder(context.scene)
         out_dir = os.path.join(folder, "out")
         if self.resume and not os.path.isdir(out_dir):
-            raise engine.EngineError("nothing to resume: no identification in %s" % out_dir)
+            raise engine.EngineError("nothing to resume: no %s in %s" % (self.run_name, out_dir))
         job, self.note = write_job(context, folder)
         if not self.resume:
             start_afresh(out_dir)
-        return engine.identify_args(exe, job, out_dir, prefs.threads(context)), out_dir
+        return self.engine_args(exe, job, out_dir, prefs.threads(context)), out_dir
+
+
+class _IdentifyBase(JobOperator):
+    job_kind = "identify"
+    run_name = "identification"
+
+    folder = staticmethod(identify_dir)
+    engine_args = staticmethod(engine.identify_args)
 
     def on_success(self, context, out_dir):
         read_result(context, out_dir)

@@ -166,3 +166,29 @@ def use_engine(addon):
         prefs.engine_path = path
     yield set_path
     prefs.engine_path = ""
+
+
+@pytest.fixture
+def press_cancel(monkeypatch):
+    """press_cancel(kind, when): watch every poll an engine operator makes (the pump its modal timer
+    calls) and press the panel's Cancel in the first job once `when(status)` holds. Returns (seen,
+    jobs): per poll (job number from 1, progress, status line), and each job started."""
+    from viscoscope.operators import runner
+
+    def watch(kind, when):
+        seen, jobs = [], []
+        real_pump = runner.pump
+
+        def pump(context, job_kind):
+            running = runner.ACTIVE.get(job_kind)
+            if running is not None and (not jobs or jobs[-1] is not running.job):
+                jobs.append(running.job)
+            result = real_pump(context, job_kind)
+            st = runner.status(context, kind)
+            seen.append((len(jobs), st.progress, st.status))
+            if len(jobs) == 1 and when(st) and not jobs[0].cancel_requested:
+                assert bpy.ops.viscoscope.cancel_job(kind=kind) == {'FINISHED'}
+            return result
+        monkeypatch.setattr(runner, "pump", pump)
+        return seen, jobs
+    return watch

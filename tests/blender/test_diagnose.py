@@ -17,7 +17,6 @@ import bpy
 import pytest
 
 from viscoscope import engine, schema, scene_export
-from viscoscope.operators import runner
 from viscoscope.operators.diagnose import diagnose_dir
 
 pytestmark = pytest.mark.engine
@@ -88,7 +87,7 @@ def forget_plots(tmp_work):
 
 
 def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp_work, engine_path, use_engine,
-                                                                        monkeypatch):
+                                                                        press_cancel):
     use_engine(engine_path)
     _film_scene(ctx.scene, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
     vs = ctx.scene.viscoscope
@@ -96,20 +95,7 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
 
     # Press Cancel at the first generation the engine reports, as the panel's button would.
     st = vs.diagnose_job
-    seen, jobs = [], []
-    real_pump = runner.pump
-
-    def pump(context, kind):
-        running = runner.ACTIVE.get(kind)
-        if running is not None and (not jobs or jobs[-1] is not running.job):
-            jobs.append(running.job)
-        result = real_pump(context, kind)
-        seen.append((len(jobs), st.progress, st.status))
-        if len(jobs) == 1 and "Generation" in st.status and not jobs[0].cancel_requested:
-            assert bpy.ops.viscoscope.cancel_job(kind='diagnose') == {'FINISHED'}
-        return result
-    monkeypatch.setattr(runner, "pump", pump)
-
+    seen, jobs = press_cancel("diagnose", lambda status: "Generation" in status.status)
     assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'CANCELLED'}
     job = json.load(open(os.path.join(diagnose_dir(ctx.scene), "job.json")))
     assert job["forward_model"] == "thin_film" and "video" not in job and "camera" not in job
@@ -147,7 +133,6 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
     print("\n[diagnose] Newtonian track: %s; %s" % (vs.diagnosis_conclusion, base))
 
     # A changed job runs afresh in the same folder: the earlier run's checkpoints would be refused.
-    monkeypatch.setattr(runner, "pump", real_pump)
     vs.eta_initial = 30.0
     assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'FINISHED'}, st.error
     assert vs.diagnosis_conclusion == "no missing effect"

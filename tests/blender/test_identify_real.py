@@ -11,16 +11,15 @@ import json
 import math
 import os
 import shutil
-import struct
 import subprocess
 import time
-import zlib
 
 import bpy
 import pytest
+from reference_masks import silhouette_rows, write_gray_png, write_manifest
 
 from viscoscope import engine, scene_export
-from viscoscope.operators import container, identify, runner
+from viscoscope.operators import container, identify
 from viscoscope.operators.identify import identify_dir
 
 WIDTH, HEIGHT = 96, 64   # camera image (and reference masks), pixels
@@ -28,38 +27,6 @@ FPS = 10
 FRAMES = (1, 2, 3)       # reference frames = simulation frames (Blender frame_start is time 0)
 ETA_TRUE = 1.5           # Pa·s, the reference's viscosity
 TABLE, LIQUID = 90, 220  # grey levels of the footage
-
-
-def _write_gray_png(path, rows):
-    """An 8-bit greyscale PNG from rows of 0..255 values (top row first)."""
-    raw = b"".join(b"\x00" + bytes(row) for row in rows)
-
-    def chunk(tag, data):
-        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xffffffff)
-    with open(path, "wb") as fh:
-        fh.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", len(rows[0]), len(rows), 8, 0, 0, 0, 0))
-                 + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
-
-
-def _write_manifest(folder, masks, source):
-    with open(os.path.join(folder, "manifest.json"), "w", encoding="utf-8") as fh:
-        json.dump({"format": "viscoscope.reference", "version": 1, "source": source, "fps": float(FPS),
-                   "width": WIDTH, "height": HEIGHT, "frames": list(FRAMES),
-                   "times_s": [f / FPS for f in FRAMES], "weights": [1.0] * len(FRAMES), "masks": masks}, fh, indent=1)
-
-
-def _silhouette_rows(diff_png):
-    """Simulated-silhouette mask from `score`'s difference image against an empty reference: false
-    positives (orange, R = 255) are the silhouette, agreement outside (grey 40) is background."""
-    img = bpy.data.images.load(diff_png)
-    try:
-        img.colorspace_settings.name = 'Non-Color'
-        w, h = img.size
-        px = img.pixels[:]
-        rows = [[255 if px[4 * (y * w + x)] > 0.5 else 0 for x in range(w)] for y in range(h)]
-    finally:
-        bpy.data.images.remove(img)
-    return rows[::-1]  # Blender's pixels start at the bottom row
 
 
 def _make_reference(ctx, engine_path, work):
@@ -79,21 +46,21 @@ def _make_reference(ctx, engine_path, work):
     os.makedirs(os.path.join(empty, "masks"))
     names = ["masks/mask_%05d.png" % f for f in FRAMES]
     for name in names:
-        _write_gray_png(os.path.join(empty, name), [[0] * WIDTH for _ in range(HEIGHT)])
-    _write_manifest(empty, names, "empty")
+        write_gray_png(os.path.join(empty, name), [[0] * WIDTH for _ in range(HEIGHT)])
+    write_manifest(empty, FRAMES, FPS, (WIDTH, HEIGHT), names, "empty")
     proc = run("score", "--camera", os.path.join(ref, "camera.json"), "--reference", empty,
                "--sim", os.path.join(ref, "sim"), "--sim-first", str(FRAMES[0]), "--out", os.path.join(ref, "score"),
                "--progress", "none")
     assert proc.returncode == 0, proc.stderr
     footage = os.path.join(ref, "footage")
     os.makedirs(footage)
-    _write_gray_png(os.path.join(footage, "frame_00000.png"), [[TABLE] * WIDTH for _ in range(HEIGHT)])
+    write_gray_png(os.path.join(footage, "frame_00000.png"), [[TABLE] * WIDTH for _ in range(HEIGHT)])
     areas, masks = [], []
     for frame in FRAMES:
-        rows = _silhouette_rows(os.path.join(ref, "score", "diff_%05d.png" % frame))
+        rows = silhouette_rows(os.path.join(ref, "score", "diff_%05d.png" % frame))
         areas.append(sum(v > 0 for row in rows for v in row))
         masks.append(rows)
-        _write_gray_png(os.path.join(footage, "frame_%05d.png" % frame),
+        write_gray_png(os.path.join(footage, "frame_%05d.png" % frame),
                         [[LIQUID if v else TABLE for v in row] for row in rows])
     video = os.path.join(work, "pour.mkv")
     subprocess.run(["ffmpeg", "-loglevel", "error", "-framerate", str(FPS), "-i",
@@ -131,7 +98,8 @@ def _capture_scene(ctx):
 
 
 @pytest.mark.engine
-def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_path, use_engine, monkeypatch, request):
+def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_path, use_engine, monkeypatch, request,
+                                                        press_cancel):
     if shutil.which("ffmpeg") is None:
         pytest.skip("ffmpeg is not installed")
     t0 = time.monotonic()
@@ -154,23 +122,10 @@ def test_real_engine_identify_cancel_resume_and_results(ctx, tmp_work, engine_pa
     vs.eta_initial, vs.eta_spread = 4.0, 2.0
     vs.sim_seed = 1
 
-    # Watch every poll the operator makes (the same pump its modal timer calls): record what the
-    # scene's progress properties show, and press Cancel once a progress update has arrived.
+    # Record what the scene's progress properties show at every poll, and press Cancel once a
+    # progress update has arrived.
     st = vs.identify_job
-    seen = []
-    jobs = []
-    real_pump = runner.pump
-
-    def pump(context, kind):
-        running = runner.ACTIVE.get(kind)
-        if running is not None and (not jobs or jobs[-1] is not running.job):
-            jobs.append(running.job)
-        result = real_pump(context, kind)
-        seen.append((len(jobs), st.progress, st.status))
-        if len(jobs) == 1 and st.progress > 0 and not jobs[0].cancel_requested:
-            assert bpy.ops.viscoscope.cancel_job(kind='identify') == {'FINISHED'}
-        return result
-    monkeypatch.setattr(runner, "pump", pump)
+    seen, jobs = press_cancel("identify", lambda status: status.progress > 0)
 
     t_start = time.monotonic()
     assert bpy.ops.viscoscope.identify('EXEC_DEFAULT') == {'CANCELLED'}
