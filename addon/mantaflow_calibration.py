@@ -30,11 +30,16 @@ import sys
 import threading
 import time
 
+if __package__:
+    from .atomic_files import written_atomically
+else:  # run as a script by the background Blender
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from atomic_files import written_atomically
+
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_CANCELLED = 0, 1, 2, 3
 VISCOSITY_VALUE_MIN, VISCOSITY_VALUE_MAX = 1e-6, 10.0  # RNA range of viscosity_value
 FORMAT = "viscoscope.mantaflow_calibration"
 FLAT_E_SHARE, FLAT_SPAN = 0.05, 2.0  # a plateau of E: within 5 % of the least over a factor 2 of values
-GROUND_BAND_SHARE = 0.25  # identify's default ground band, a share of the outlet's height (job.h)
 
 
 class BadInput(Exception):
@@ -56,10 +61,8 @@ def finish(code, message=""):
 
 
 def write_json(path, doc):
-    partial = path + ".partial"
-    with open(partial, "w", encoding="utf-8") as fh:
+    with written_atomically(path) as fh:
         json.dump(doc, fh, indent=1, allow_nan=False)
-    os.replace(partial, path)
 
 
 def read_json(path):
@@ -198,15 +201,6 @@ def scored_reference(reference, weights, folder):
     return folder
 
 
-def ground_band(scene_doc):
-    """identify's default ground band: GROUND_BAND_SHARE of the first holed cup's outlet height."""
-    grounds = [s["height"] for s in scene_doc.get("solids", []) if s.get("type") == "ground"]
-    cups = [s for s in scene_doc.get("solids", []) if s.get("type") == "cup" and s.get("hole_radius", 0) > 0]
-    if not grounds or not cups or cups[0]["position"][2] <= grounds[0]:
-        return 0.0
-    return GROUND_BAND_SHARE * (cups[0]["position"][2] - grounds[0])
-
-
 # --- one bake -------------------------------------------------------------------------------
 
 class CacheWatcher(threading.Thread):
@@ -229,11 +223,9 @@ class CacheWatcher(threading.Thread):
 
 
 def write_obj(path, vertices, triangles):
-    partial = path + ".partial"
-    with open(partial, "w", encoding="utf-8") as fh:
+    with written_atomically(path) as fh:
         fh.write("".join("v %.7g %.7g %.7g\n" % v for v in vertices))
         fh.write("".join("f %d %d %d\n" % (a + 1, b + 1, c + 1) for a, b, c in triangles))
-    os.replace(partial, path)
 
 
 def export_surfaces(scene, domain, folder, last):
@@ -302,10 +294,11 @@ def bake(scene, domain, ds, value, folder, last, event):
     return seconds, counts
 
 
-def score(args, surfaces, reference, sim_first, band, out):
-    """E of a bake's surfaces against the reference, by `viscoscope score`."""
+def score(args, surfaces, reference, sim_first, out):
+    """E of a bake's surfaces against the reference, by `viscoscope score`, and the ground band (m) it
+    left out: identify's default for the scene."""
     cmd = [args.engine, "score", "--camera", args.camera, "--reference", reference, "--sim", surfaces,
-           "--scene", args.scene, "--ground-band", repr(band), "--sim-first", str(sim_first),
+           "--scene", args.scene, "--identify-ground-band", "--sim-first", str(sim_first),
            "--out", out, "--progress", "none"]
     proc = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True)
     if proc.returncode != 0:
@@ -315,7 +308,7 @@ def score(args, surfaces, reference, sim_first, band, out):
     doc = read_json(os.path.join(out, "score.json"))
     if doc is None or "E" not in doc:
         raise RuntimeError("viscoscope score wrote no E in %s" % out)
-    return float(doc["E"])
+    return float(doc["E"]), float(doc["ground_band_m"])
 
 
 # --- the run -----------------------------------------------------------------------------------
@@ -365,7 +358,7 @@ def check_inputs(args):
         raise BadInput("--factors: comma-separated numbers expected, got %r" % args.factors) from None
     if not factors or min(factors) <= 0:
         raise BadInput("--factors: positive numbers expected, got %r" % args.factors)
-    return manifest, scene_doc, factors
+    return manifest, factors
 
 
 def calibration_warnings(tried):
@@ -388,7 +381,7 @@ def calibration_warnings(tried):
 
 def run(args):
     import bpy
-    manifest, scene_doc, factors = check_inputs(args)
+    manifest, factors = check_inputs(args)
     scene = bpy.context.scene
     domain, ds = liquid_domain(args.domain)
     if args.resolution:
@@ -397,12 +390,11 @@ def run(args):
     first, last, weights = frame_mapping(manifest, fps, args.time_offset, scene.frame_end - scene.frame_start)
     os.makedirs(args.out, exist_ok=True)
     reference = scored_reference(args.reference, weights, os.path.join(args.out, "reference"))
-    band = ground_band(scene_doc)
     bake_key = {"fingerprint": digest(scene_fingerprint(scene)), "resolution": ds.resolution_max,
                 "frame_start": scene.frame_start, "frames": last + 1}
     score_key = {"reference": file_digest(os.path.join(reference, "manifest.json")),
                  "camera": file_digest(args.camera), "scene": file_digest(args.scene),
-                 "ground_band": band, "sim_first": first}
+                 "sim_first": first}
 
     tried = {}   # value → E
     records = {}
@@ -434,18 +426,20 @@ def run(args):
             event.update(best_value=best, best_E=tried[best])
         record = read_json(os.path.join(folder, "bake.json")) or {}
         reused = record.get("key") == dict(bake_key, viscosity_value=value) and \
-            record.get("score_key") == score_key and isinstance(record.get("E"), (int, float))
+            record.get("score_key") == score_key and \
+            all(isinstance(record.get(k), (int, float)) for k in ("E", "ground_band_m"))
         if not reused:
             emit(dict(event, frame=0, frames=last + 1))
             seconds, counts = bake(scene, domain, ds, value, folder, last, event)
             emit(dict(event, stage="score", frame=last + 1, frames=last + 1))
-            E = score(args, os.path.join(folder, "surfaces"), reference, first, band, os.path.join(folder, "score"))
-            record = {"key": dict(bake_key, viscosity_value=value), "score_key": score_key, "E": E,
+            E, band = score(args, os.path.join(folder, "surfaces"), reference, first, os.path.join(folder, "score"))
+            record = {"key": dict(bake_key, viscosity_value=value), "score_key": score_key, "E": E, "ground_band_m": band,
                       "bake_seconds": seconds, "triangles": counts}
             write_json(os.path.join(folder, "bake.json"), record)
             shutil.rmtree(os.path.join(folder, "cache"), ignore_errors=True)  # the surfaces are kept
         tried[value] = record["E"]
-        records[value] = {"viscosity_value": value, "E": record["E"], "bake_seconds": record["bake_seconds"],
+        records[value] = {"viscosity_value": value, "E": record["E"], "ground_band_m": record["ground_band_m"],
+                          "bake_seconds": record["bake_seconds"],
                           "reused": reused, "score": os.path.join(folder, "score", "score.json")}
         best = min(tried, key=tried.get)
         emit(dict(event, stage="scored", frame=last + 1, frames=last + 1, E=record["E"],
@@ -456,7 +450,8 @@ def run(args):
     bracketed = values[0] < best < values[-1]
     doc = {
         "format": FORMAT, "version": 1, "domain": domain.name, "resolution": ds.resolution_max,
-        "frames": last + 1, "sim_first": first, "fps": fps, "ground_band_m": band,
+        "frames": last + 1, "sim_first": first, "fps": fps,
+        "ground_band_m": records[best]["ground_band_m"],
         "formula_value": args.formula, "chosen_value": best, "ratio": best / args.formula,
         "E": tried[best], "bracketed": bracketed,
         "values": [records[v] for v in values],

@@ -1,7 +1,13 @@
 """Helpers shared by the sample-scene builders (run inside Blender, headless).
 
     blender -b --factory-startup --python sample_scenes/<scene>.py -- --out DIR [--res N] [--frames N]
-        [--samples N] [--no-bake] [--no-render]
+        [--samples N] [--no-bake] [--no-render] [--fluid NAME | --preset FILE] [--solver mantaflow|viscoscope]
+
+A transfer scene (donut, honey dipper) is simulated either by Blender's Mantaflow, with the fluid
+applied to its domain, or by the Viscoscope engine through the Transfer panel ("Simulate with
+Viscoscope"), which carries the whole material: a shear-thinning or yield-stress preset as well as a
+Newtonian one. Its objects always have their Viscoscope roles; Mantaflow's modifiers only when
+Mantaflow simulates.
 """
 
 import argparse
@@ -15,15 +21,21 @@ import bpy
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def parse_args(default_res=32, default_frames=20):
+def parse_args(default_res=32, default_frames=20, fluids=None):
+    """The command line after "--". `fluids` (name → fluid values) adds --fluid, --preset and --solver."""
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default=os.path.join(REPO, "build", "sample_scenes"))
-    parser.add_argument("--res", type=int, default=default_res, help="Mantaflow resolution_max")
+    parser.add_argument("--res", type=int, default=default_res,
+                        help="grid cells along the domain's longest side (either solver)")
     parser.add_argument("--frames", type=int, default=default_frames)
     parser.add_argument("--samples", type=int, default=8, help="Cycles samples")
-    parser.add_argument("--no-bake", action="store_true")
+    parser.add_argument("--no-bake", action="store_true", help="build and save the scene, simulate nothing")
     parser.add_argument("--no-render", action="store_true")
+    if fluids:
+        parser.add_argument("--fluid", choices=list(fluids), default=next(iter(fluids)))
+        parser.add_argument("--preset", help="a Viscoscope fluid preset file (.py) to use instead of --fluid")
+        parser.add_argument("--solver", choices=("mantaflow", "viscoscope"), default="mantaflow")
     return parser.parse_args(argv)
 
 
@@ -51,13 +63,19 @@ def empty_scene():
     return scene
 
 
-def set_fluid(scene, description, eta, rho, sigma, color):
+def set_fluid(scene, values):
+    """The scene's Fluid Material set to `values` (fluid property → value; the rest keep defaults)."""
     fluid = scene.viscoscope.fluid
-    fluid.description = description
-    fluid.viscosity, fluid.density, fluid.surface_tension = eta, rho, sigma
-    fluid.color = color
     fluid.roughness, fluid.transmission = 0.1, 0.5
+    for key, value in values.items():
+        setattr(fluid, key, value)
     return fluid
+
+
+def load_preset(path):
+    """The scene's Fluid Material from a preset file, as the panel's preset menu loads it."""
+    if bpy.ops.viscoscope.fluid_preset_load(filepath=os.path.abspath(path)) != {'FINISHED'}:
+        raise SystemExit("error: could not load the fluid preset %s" % path)
 
 
 def add_camera(scene, location, target, lens=50.0):
@@ -98,6 +116,14 @@ def add_mesh_object(scene, name, verts, faces, material=None):
     scene.collection.objects.link(obj)
     if material is not None:
         mesh.materials.append(material)
+    return obj
+
+
+def cylinder(scene, name, radius, depth, location):
+    """A vertical cylinder (its axis along Z) centred at `location`."""
+    bpy.ops.mesh.primitive_cylinder_add(radius=radius, depth=depth, location=location)
+    obj = bpy.context.active_object
+    obj.name = name
     return obj
 
 
@@ -185,6 +211,73 @@ def bake(dom):
         result = bpy.ops.fluid.bake_all()
     if result != {'FINISHED'}:
         raise SystemExit("error: Mantaflow bake failed: %s" % result)
+
+
+def transfer_domain(scene, lo, hi, res, frames, solver, cache_dir=None):
+    """The domain over [lo, hi] with `res` cells along its longest side: Mantaflow's liquid domain
+    (named "Fluid Domain"), or for the Viscoscope engine a box that only bounds the simulation."""
+    if solver == "mantaflow":
+        dom = make_domain(scene, lo, hi, res, frames, cache_dir=cache_dir)
+    else:
+        corners = ((lo[0], hi[0]), (lo[1], hi[1]), (lo[2], hi[2]))
+        dom = add_mesh_object(scene, "Fluid Domain", [(x, y, z) for x in corners[0] for y in corners[1]
+                                                      for z in corners[2]], [])
+        dom.display_type = 'BOUNDS'
+        dom.hide_render = True
+        scene.frame_start, scene.frame_end = 1, frames
+    dom.viscoscope.role = 'DOMAIN'
+    scene.viscoscope.sim_resolution, scene.viscoscope.sim_frames = res, frames
+    return dom
+
+
+def transfer_source(obj, solver, speed, pour_seconds):
+    """`obj`, a round source of liquid pouring straight down at `speed` m/s: a Mantaflow inflow (it
+    pours all along), or a Viscoscope emitter disc of the object's radius at its origin, pouring for
+    the first `pour_seconds`."""
+    obj.hide_render = True
+    obj.rotation_euler = (math.pi, 0.0, 0.0)  # the emitter pours along its local +Z
+    radius = obj.dimensions.x / 2
+    ov = obj.viscoscope
+    ov.role = 'EMITTER'
+    ov.emitter_radius = radius / obj.scale.x
+    ov.emitter_flux = math.pi * radius ** 2 * speed
+    ov.emitter_start, ov.emitter_end = 0.0, pour_seconds
+    if solver == "mantaflow":
+        make_flow(obj, velocity=(0.0, 0.0, -speed))
+
+
+def transfer_solid(obj, solver):
+    """`obj` as an obstacle: a Mantaflow collision effector, or a Viscoscope mesh solid."""
+    obj.viscoscope.role = 'SOLID'
+    if solver == "mantaflow":
+        make_effector(obj)
+
+
+def simulate(scene, dom, solver, work_dir):
+    """Bake Mantaflow's domain, or run the Viscoscope engine on the scene (its Transfer panel's
+    "Simulate with Viscoscope", working in work_dir) and import its surface with the fluid material."""
+    if solver == "mantaflow":
+        bake(dom)
+        return
+    vs = scene.viscoscope
+    vs.work_dir = work_dir
+    if bpy.ops.viscoscope.simulate('EXEC_DEFAULT') != {'FINISHED'}:
+        raise SystemExit("error: the Viscoscope simulation failed: %s" % vs.simulate_job.error)
+
+
+def run_name(args):
+    """What a transfer scene's files are named after: the preset file, or the sample fluid."""
+    return os.path.splitext(os.path.basename(args.preset))[0] if args.preset else args.fluid
+
+
+def finish(scene, dom, args, name):
+    """Simulate with args.solver (unless --no-bake), render the last frame (unless --no-render) and
+    save DIR/<name>.blend."""
+    if not args.no_bake:
+        simulate(scene, dom, args.solver, os.path.join(os.path.abspath(args.out), name + "_viscoscope"))
+    if not args.no_render:
+        render(scene, os.path.join(args.out, name + ".png"), args.samples, frame=args.frames)
+    save(os.path.join(args.out, name + ".blend"))
 
 
 def render(scene, path, samples=4, resolution=(320, 240), frame=None):

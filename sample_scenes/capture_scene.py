@@ -1,13 +1,13 @@
 """The capture scene: a cup with a hole in its bottom standing above the ground, a camera looking at
 it, the honey fluid material, ready for the workflow (Reference → Camera → Identify).
 
-    blender -b --factory-startup --python sample_scenes/capture_scene.py -- --out DIR [--clip]
+    blender -b --factory-startup --python sample_scenes/capture_scene.py -- --out DIR [--clip] [--frames 24]
 writes DIR/capture.blend. With --clip (needs the engine: VISCOSCOPE_ENGINE, preferences or
 build/bin), it also simulates the pour with the Viscoscope engine at a resolution identification
 does not use, renders it with Cycles into DIR/reference.mp4 and loads that as the reference video,
 so a new user can click through the whole workflow on embedded data. --eta ETA sets the honey's η
 (Pa·s) the clip is simulated with; --mantaflow RES adds Blender's own liquid solver on the same cup
-(add_mantaflow) at that resolution, for Calibrate Mantaflow to Footage.
+(add_mantaflow) at that resolution, for Calibrate Mantaflow to Footage; --frames the clip's length (30 fps).
 """
 
 import os
@@ -31,7 +31,7 @@ def mark_points(scene):
         p.image = camera_math.project(cv, list(p.world))
 
 
-def build():
+def build(frames=24):
     import bpy
     scene = _common.empty_scene()
     from viscoscope.operators import container
@@ -39,15 +39,16 @@ def build():
     cup.data.materials.append(_common.simple_material("Cup", (0.85, 0.85, 0.9), 0.3))
     ground.data.materials.append(_common.simple_material("Table", (0.35, 0.3, 0.25), 0.7))
     scene.viscoscope.fill_volume = 1.7e-4
-    _common.set_fluid(scene, "Honey (capture)", 8.0, 1400.0, 0.0, (0.85, 0.5, 0.08))
+    _common.set_fluid(scene, {"description": "Honey (capture)", "viscosity": 8.0, "density": 1400.0,
+                             "surface_tension": 0.0, "color": (0.85, 0.5, 0.08)})
     scene.viscoscope.sim_resolution = 32
-    scene.viscoscope.sim_frames = 24
+    scene.viscoscope.sim_frames = frames
     _common.add_camera(scene, (0.0, -0.45, 0.12), (0.0, 0.0, 0.07), lens=50)
     _common.add_lights(scene, (0, 0, 0.06), scale=0.5)
     # The render size is the reference clip's, so that the camera's image is the footage's.
     scene.render.resolution_x, scene.render.resolution_y = CLIP_SIZE
     scene.render.fps = 30
-    scene.frame_start, scene.frame_end = 1, 24
+    scene.frame_start, scene.frame_end = 1, frames
     # Four reference points for "Match camera from points": the cup's rim and the base.
     for label, world in (("rim left", (-0.046, 0.0, 0.114)), ("rim right", (0.046, 0.0, 0.114)),
                          ("base left", (-0.046, 0.0, 0.05)), ("base right", (0.046, 0.0, 0.05))):
@@ -158,8 +159,8 @@ if __name__ == "__main__":
             extra[name] = float(argv[i + 1])
             del argv[i:i + 2]
     _sys.argv = _sys.argv[:_sys.argv.index("--") + 1] + argv
-    args = _common.parse_args()
-    scene = build()
+    args = _common.parse_args(default_frames=24)
+    scene = build(args.frames)
     if "--eta" in extra:
         scene.viscoscope.fluid.viscosity = extra["--eta"]
     if with_clip:

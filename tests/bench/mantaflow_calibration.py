@@ -5,7 +5,7 @@ formula's ν·0.4 s/L² (issue 65 §3). Prints figures; never asserts on time.
     /usr/bin/python3 tests/bench/mantaflow_calibration.py [--etas 20,3] [--res 64] [--workdir DIR]
 
 For each η it builds the capture scene with a reference clip rendered from the engine's own
-simulation at η (sample_scenes/capture_scene.py --clip --eta η --mantaflow RES: Cycles, 24 frames),
+simulation at η (sample_scenes/capture_scene.py --clip --eta η --mantaflow RES: Cycles, --frames),
 extracts the clip's silhouettes with the Silhouettes panel's settings (Preview Silhouettes), and runs
 Calibrate Mantaflow to Footage on the Mantaflow domain the scene builder adds over the same cup (the
 formula's value from that η, ρ = 1400 kg/m³). It prints the formula's viscosity_value, the calibrated
@@ -68,6 +68,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--etas", default="20,3", help="comma-separated η of the reference clips, Pa·s")
     p.add_argument("--res", type=int, default=64, help="Mantaflow resolution_max of the calibration bakes")
+    p.add_argument("--frames", type=int, default=24, help="frames of the reference clip (30 fps)")
     p.add_argument("--samples", type=int, default=4, help="Cycles samples of the reference clip")
     p.add_argument("--workdir", default=os.path.join(REPO, "build", "bench", "mantaflow_calibration"))
     p.add_argument("--blender", default="/usr/bin/blender")
@@ -85,7 +86,7 @@ def main():
         if not os.path.isfile(blend):  # the clip takes minutes: a rerun keeps it
             code, build_s = run([args.blender, "-b", "--factory-startup", "--python",
                                  os.path.join(REPO, "sample_scenes", "capture_scene.py"), "--", "--out", out,
-                                 "--clip", "--eta", str(eta), "--mantaflow", str(args.res),
+                                 "--clip", "--eta", str(eta), "--mantaflow", str(args.res), "--frames", str(args.frames),
                                  "--samples", str(args.samples)], os.path.join(out, "build.log"))
             if code != 0:
                 sys.exit("η %g: building the scene failed:\n%s" % (eta, tail(os.path.join(out, "build.log"))))

@@ -10,16 +10,22 @@ import json
 import math
 import os
 import subprocess
+import sys
 import time
 
 import bpy
 import pytest
 from reference_masks import silhouette_rows, write_gray_png, write_manifest
 
+import conftest
+
 from viscoscope import engine, mantaflow
 from viscoscope.mantaflow_calibration import export_surfaces
 from viscoscope.operators import container, mantaflow_calibration, runner
 from viscoscope.operators.identify import identify_dir
+
+sys.path.insert(0, os.path.join(conftest.REPO, "sample_scenes"))
+import _common  # noqa: E402
 
 WIDTH, HEIGHT = 96, 64
 FPS = 24
@@ -45,21 +51,9 @@ def _column_scene(ctx, value_true=0.1):
     column = ctx.active_object
     column.name = "Liquid column"
     column.viscoscope.role = 'LIQUID'
-    mod = column.modifiers.new("Fluid", 'FLUID')
-    mod.fluid_type = 'FLOW'
-    mod.flow_settings.flow_type = 'LIQUID'
-    mod.flow_settings.flow_behavior = 'GEOMETRY'
-    bpy.ops.mesh.primitive_cube_add(size=1.0, location=tuple((a + b) / 2 for a, b in zip(lo, hi)))
-    domain = ctx.active_object
-    domain.name = "Mantaflow Domain"
-    domain.scale = tuple(b - a for a, b in zip(lo, hi))
-    bpy.ops.object.transform_apply(location=False, rotation=False, scale=True)
-    mod = domain.modifiers.new("Fluid", 'FLUID')
-    mod.fluid_type = 'DOMAIN'
-    ds = mod.domain_settings
-    ds.domain_type = 'LIQUID'
-    ds.use_collision_border_bottom = True
-    ds.use_mesh = True
+    _common.make_flow(column, behavior='GEOMETRY')
+    domain = _common.make_domain(scene, lo, hi, RES_CALIBRATION, 1 + FRAMES, name="Mantaflow Domain")
+    domain.modifiers["Fluid"].domain_settings.use_collision_border_bottom = True
     bpy.ops.object.camera_add(location=(0.0, -0.45, 0.06), rotation=(math.radians(85), 0, 0))
     cam = ctx.active_object
     scene.camera = cam

@@ -153,11 +153,11 @@ def test_donut_scene(tmp_path, fluid, eta, rho):
 
 def test_honey_dipper_scene(tmp_path):
     _run("honey_dipper.py", tmp_path, *FAST)
-    _check_cache(str(tmp_path / "honey_dipper_cache"))
-    assert _not_blank(str(tmp_path / "honey_dipper.png"))
-    _check_background_shows(str(tmp_path / "honey_dipper.png"))
-    _check_domain(str(tmp_path / "honey_dipper.blend"), 7.86, 1420.0)
-    _check_liquid(_liquid_at_last_frame(str(tmp_path / "honey_dipper.blend")), "Honey Inflow", "Honey Dipper")
+    _check_cache(str(tmp_path / "honey_dipper_honey_cache"))
+    assert _not_blank(str(tmp_path / "honey_dipper_honey.png"))
+    _check_background_shows(str(tmp_path / "honey_dipper_honey.png"))
+    _check_domain(str(tmp_path / "honey_dipper_honey.blend"), 7.86, 1420.0)
+    _check_liquid(_liquid_at_last_frame(str(tmp_path / "honey_dipper_honey.blend")), "Honey Inflow", "Honey Dipper")
 
 
 # Inside Blender on a built capture.blend: move the camera away, Match Camera from the sample's

@@ -212,6 +212,12 @@ TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
     const double ratio = banded.at("E").get<double>() / all.at("E").get<double>();
     std::printf("E with the band / without: %.4f (rows kept %g of %g)\n", ratio, kept, rows);
     EXPECT_NEAR(ratio, kept / rows, 1.5 / rows);  // the wall's edge rows may be drawn or not
+    // --identify-ground-band leaves out what a job without "ground_band" would: a quarter of the
+    // outlet's 3 cm.
+    const nlohmann::json identified = score("identified", " --identify-ground-band");
+    EXPECT_NEAR(identified.at("ground_band_m").get<double>(), 0.25 * 0.03, 1e-12);
+    EXPECT_GT(identified.at("E").get<double>(), banded.at("E").get<double>());  // a thinner band
+    EXPECT_LT(identified.at("E").get<double>(), all.at("E").get<double>());
 
     const fs::path out = dir_ / "bad";
     for (const char* band : {" --ground-band -0.01", " --ground-band nan", " --ground-band 0.03"}) {
@@ -224,6 +230,8 @@ TEST_F(CliObserve, ScoreLeavesOutTheGroundBand) {
                                         " --out " + out.string() + " --ground-band 0.01");
     expectBadInput(sceneless, out);
     EXPECT_NE(sceneless.err.find("needs the scene"), std::string::npos) << sceneless.err;
+    const CommandResult both = run(common + " --out " + out.string() + " --ground-band 0.01 --identify-ground-band");
+    expectBadInput(both, out);
 }
 
 // Phones store portrait clips as landscape frames plus a rotation tag; masks must come out upright.

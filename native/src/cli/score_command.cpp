@@ -1,6 +1,7 @@
 // `viscoscope score`: simulated surfaces against reference silhouettes, E = Σ_f ω_f E_f (eq. 9).
 #include "cli/commands.h"
 #include "cli/progress.h"
+#include "identify/identify.h"
 #include "observe/observe.h"
 #include "scene/scene.h"
 #include "sim/sim.h"
@@ -26,6 +27,7 @@ struct ScoreArguments {
                 comparison = silhouetteComparisonName(kDefaultSilhouetteComparison);
     int simFirst = 0;
     double groundBand = 0;
+    bool identifyGroundBand = false;
     bool fast = false;
 };
 
@@ -123,10 +125,15 @@ int runScore(const ScoreArguments& args) {
     const SilhouetteComparison comparison = parseSilhouetteComparison(args.comparison, "--comparison");
     const std::optional<Scene> scene = scoredScene(args);
     cv::Mat1b compared = reference.comparedPixels();
-    if (args.groundBand != 0) {
-        if (!scene) throw InputError("--ground-band: needs the scene: give --scene (SIM has no simulation.json)");
-        requireGroundBandBelowOutlet(*scene, args.groundBand, "--ground-band");
-        compared = excludeGroundBand(compared, camera, *scene, args.groundBand);
+    if (args.identifyGroundBand && args.groundBand != 0)
+        throw InputError("--identify-ground-band: give it or --ground-band, not both");
+    double groundBand = args.groundBand;
+    if (groundBand != 0 || args.identifyGroundBand) {
+        const char* option = args.identifyGroundBand ? "--identify-ground-band" : "--ground-band";
+        if (!scene) throw InputError(std::string(option) + ": needs the scene: give --scene (SIM has no simulation.json)");
+        if (args.identifyGroundBand) groundBand = identify::defaultGroundBand(*scene);
+        requireGroundBandBelowOutlet(*scene, groundBand, option);
+        compared = excludeGroundBand(compared, camera, *scene, groundBand);
     }
     const std::unique_ptr<ScoredSolids> solids =
         scene ? std::make_unique<ScoredSolids>(
@@ -176,7 +183,7 @@ int runScore(const ScoreArguments& args) {
     }
     const nlohmann::json score{{"format", "viscoscope.score"}, {"version", 1},
                                {"silhouette", args.fast ? "fast" : "exact"}, {"comparison", args.comparison},
-                               {"clipped_to_solids", clipped}, {"ground_band_m", args.groundBand},
+                               {"clipped_to_solids", clipped}, {"ground_band_m", groundBand},
                                {"camera", args.camera},       {"reference", args.reference},
                                {"sim", args.sim},             {"pixels", reference.width * reference.height},
                                {"compared_pixels", leftOut},
@@ -201,6 +208,8 @@ Command addScoreCommand(CLI::App& app) {
                     "Leave out the image rows this many metres above the ground at the outlet, as identify's "
                     "ground_band does (needs the scene; 0 compares every row)")
         ->capture_default_str();
+    sub->add_flag("--identify-ground-band", args->identifyGroundBand,
+                  "Leave out the ground band a job gets when it gives none (a quarter of the outlet's height)");
     sub->add_option("--sim-first", args->simFirst, "Number of the simulation frame matching the first reference frame")
         ->capture_default_str();
     sub->add_option("--out", args->outDir, "Output folder (score.json, diff_%05d.png)")->required();

@@ -249,6 +249,8 @@ ParameterSpec parseSearchedParameter(const nlohmann::json& p, const Scene& scene
     return spec;
 }
 
+double defaultGroundBand(const Scene& scene) { return kDefaultGroundBandShare * outletHeight(scene); }
+
 const char* placementScheduleName(PlacementSchedule schedule) {
     return schedule == PlacementSchedule::ByGeneration ? "by_generation" : "each_evaluation";
 }
@@ -332,7 +334,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
 
     job.areaTrackWeight = optionalNumber(doc, "area_track_weight", job.areaTrackWeight, origin);
     if (!(job.areaTrackWeight >= 0)) throw InputError(origin + ": area_track_weight: must be ≥ 0");
-    job.groundBand = optionalNumber(doc, "ground_band", kDefaultGroundBandShare * outletHeight(job.scene), origin);
+    job.groundBand = optionalNumber(doc, "ground_band", defaultGroundBand(job.scene), origin);
     requireGroundBandBelowOutlet(job.scene, job.groundBand, origin + ": ground_band");
 
     // Blender's frame_start is simulation time 0 and video frame 0; frames after frame_end are ignored.

@@ -56,6 +56,8 @@ struct FidelitySchedule {
 // A quarter of the fall: on the sample cup (10 cm) at η = 10 the rows above bands of 0.7–3.4 cm
 // all scored least at the truth (see excludeGroundBand), and the stream fills most of the view.
 constexpr double kDefaultGroundBandShare = 0.25;
+// A job's ground_band when it gives none: kDefaultGroundBandShare of the outlet's height.
+double defaultGroundBand(const Scene& scene);
 constexpr int kMaxGridPlacements = 8;  // Job::gridPlacements
 enum class PlacementSchedule { EachEvaluation, ByGeneration };  // Job::placementSchedule
 
