@@ -343,6 +343,15 @@ def run_quick(args, timeout=60.0):
     return proc.stdout
 
 
+def apparent_viscosity(exe, scene_path, shear_rate):
+    """The viscosity (Pa·s) of the material in scene_path at shear_rate (1/s), by the engine's law."""
+    out = run_quick([exe, "viscosity", scene_path, "--shear-rate", repr(float(shear_rate))])
+    try:
+        return float(json.loads(out)["viscosity_pa_s"])
+    except (ValueError, KeyError, TypeError) as exc:
+        raise EngineError("the engine's viscosity answer is not understood: %r" % out[:200]) from exc
+
+
 def format_seconds(seconds):
     if seconds is None:
         return "?"

@@ -4,11 +4,14 @@ Both of Mantaflow's viscosity paths are set (DESIGN.md, "What Mantaflow does"):
 - diffusion: use_diffusion, viscosity_base · 10^-viscosity_exponent = ν (Blender's preset convention);
 - variational: use_viscosity, viscosity_value = ν · 0.4 s / L², L the domain's longest side in metres.
 The variational value depends on the domain size, so it is recomputed when the domain is resized.
+Mantaflow's viscosity is one constant: a shear-dependent material is applied at the viscosity the
+engine's law gives at the scene's typical shear rate (typical_shear_rate), which the panel shows.
 Every assignment to a domain setting frees the domain's Mantaflow cache, baked frames included, even
 when the value does not change; settings are therefore only assigned when what is stored would change.
 """
 
 import array
+import math
 
 import bpy
 from bpy.app.handlers import persistent
@@ -16,6 +19,8 @@ from bpy.app.handlers import persistent
 from . import units
 
 NU_KEY = "viscoscope_nu"  # kinematic viscosity last applied to a domain, m²/s
+# A shear-dependent material's stand-in last applied to a domain: the shear rate (1/s) and η (Pa·s).
+SHEAR_RATE_KEY, SHEAR_VISCOSITY_KEY = "viscoscope_shear_rate", "viscoscope_viscosity_at_shear_rate"
 VISCOSITY_VALUE_MAX = 10.0  # RNA hard max of viscosity_value
 
 
@@ -55,6 +60,12 @@ def longest_side_m(obj, scale_length):
     return max(sides) * scale_length
 
 
+def typical_shear_rate(obj, scale_length, gravity):
+    """√(g/L), L the domain's longest side (m): the rate at which liquid falling or slumping across
+    the scene shears (8 /s over 15 cm), where a shear-dependent material's constant stand-in is taken."""
+    return math.sqrt(max(gravity, 1e-9) / longest_side_m(obj, scale_length))
+
+
 def set_domain_setting(ds, name, value):
     """Assign ds.<name> only if what Blender stores would change; returns whether it did.
 
@@ -82,13 +93,21 @@ def apply_variational(obj, ds, nu, scale_length):
     return value, clamped
 
 
-def apply_fluid(obj, fluid, scale_length, material=None):
-    """Set the domain's viscosity, surface tension and material from a ViscoscopeFluid.
+def apply_fluid(obj, fluid, scale_length, material=None, shear_rate_viscosity=None):
+    """Set the domain's viscosity, surface tension and material from a ViscoscopeFluid; for a
+    shear-dependent one, shear_rate_viscosity = (γ̇, η at γ̇) is the viscosity Mantaflow gets.
 
     Returns a dict of what was set (and whether viscosity_value had to be clamped).
     """
     ds = domain_settings(obj)
-    nu = units.kinematic_viscosity(fluid.viscosity, fluid.density)
+    eta = fluid.viscosity
+    for key in (SHEAR_RATE_KEY, SHEAR_VISCOSITY_KEY):
+        if key in obj:
+            del obj[key]
+    if shear_rate_viscosity is not None:
+        obj[SHEAR_RATE_KEY], obj[SHEAR_VISCOSITY_KEY] = shear_rate_viscosity
+        eta = shear_rate_viscosity[1]
+    nu = units.kinematic_viscosity(eta, fluid.density)
     base, exponent = units.diffusion_base_exponent(nu)
     # Re-applying the same fluid keeps a bake; a different one frees it, as editing the domain does.
     set_domain_setting(ds, "use_diffusion", True)

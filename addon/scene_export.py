@@ -226,6 +226,18 @@ def build_scene(scene, scene_dir, objects=None, depsgraph=None, fluid=None):
     }
 
 
+def export_material(fluid, path):
+    """Write a scene that holds only the fluid's material (in a unit box of liquid), for the engine
+    to answer questions about the material alone (`viscoscope viscosity`)."""
+    data = {"format": SCENE_FORMAT, "version": SCENE_VERSION,
+            "domain": {"min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 1.0], "resolution": 8},
+            "liquids": [{"type": "box", "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.5]}],
+            "material": material_dict(fluid), "fps": 24.0, "frames": 1}
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    with written_atomically(path) as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+
+
 def export_scene(scene, path, objects=None, fluid=None):
     """Write the scene JSON to path and return the dict."""
     data = build_scene(scene, os.path.dirname(os.path.abspath(path)), objects, fluid=fluid)

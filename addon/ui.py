@@ -4,7 +4,8 @@ import textwrap
 
 import bpy
 
-from . import engine, prefs
+from . import engine, mantaflow, prefs
+from .operators import fluid as fluid_ops
 from .operators import runner
 from .operators.silhouettes import made_with
 from .presets import VISCOSCOPE_PT_fluid_presets
@@ -343,6 +344,15 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
         col.prop(fluid, "roughness")
         col.prop(fluid, "transmission")
         layout.operator("viscoscope.apply_to_domain", icon='MOD_FLUIDSIM')
+        if fluid.model != 'NEWTONIAN':
+            domain = context.active_object
+            if domain is not None and mantaflow.SHEAR_VISCOSITY_KEY in domain:
+                text = "Mantaflow has " + fluid_ops.describe_stand_in(
+                    (domain[mantaflow.SHEAR_RATE_KEY], domain[mantaflow.SHEAR_VISCOSITY_KEY]))
+            else:
+                text = ("Mantaflow's viscosity is constant: Apply sets η at the domain's typical shear "
+                        "rate √(g/L), by the engine's law")
+            draw_message(layout, context, text, icon='INFO')
         from .operators.mantaflow_calibration import draw_calibration
         draw_calibration(layout, context)
 

@@ -24,7 +24,7 @@ FLUIDS = {
     "honey": {"description": "Honey (sample values)", "viscosity": 8.0, "density": 1420.0,
               "surface_tension": 0.07, "color": (0.9, 0.55, 0.08)},
     # A sugar glaze that sets: a Herschel–Bulkley liquid whose yield stress holds a layer
-    # τ_y/(ρg) ≈ 6 mm thick on the donut's sides. Its viscosity is Mantaflow's stand-in.
+    # τ_y/(ρg) ≈ 6 mm thick on the donut's sides.
     "glaze": {"description": "Sugar glaze (sample values: a yield-stress liquid)", "model": 'HERSCHEL_BULKLEY',
               "viscosity": 10.0, "consistency": 5.0, "flow_index": 0.6, "yield_stress": 80.0,
               "density": 1350.0, "surface_tension": 0.06, "color": (0.92, 0.88, 0.82)},

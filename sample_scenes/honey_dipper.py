@@ -21,7 +21,6 @@ FLUIDS = {
     "honey": {"description": "Honey (sample values: Takahashi & Lin 2019 measured 7.86 Pa·s)", "viscosity": 7.86,
               "density": 1420.0, "surface_tension": 0.07, "color": (0.92, 0.56, 0.07)},
     # Creamed honey thins under shear: a power law with the Newtonian honey's viscosity at 1/s.
-    # Its viscosity is Mantaflow's stand-in.
     "creamed_honey": {"description": "Creamed honey (sample values: a shear-thinning liquid)", "model": 'POWER_LAW',
                       "viscosity": 7.86, "consistency": 7.86, "flow_index": 0.4, "density": 1420.0,
                       "surface_tension": 0.07, "color": (0.95, 0.78, 0.45)},

@@ -3,6 +3,7 @@ same file name; a preset loads whole or not at all; no code injection."""
 
 import ast
 import glob
+import math
 import os
 import random
 import time
@@ -95,6 +96,7 @@ def test_save_load_apply_to_mantaflow(ctx):
     assert tuple(fluid.color) == pytest.approx((0.9, 0.5, 0.1))
     assert fluid.description == "Clover honey, 20 °C"
 
+    fluid.model = 'NEWTONIAN'  # a shear-dependent law goes to Mantaflow at a shear rate (below)
     obj, ds = _domain(ctx, size=0.2)
     assert bpy.ops.viscoscope.apply_to_domain() == {'FINISHED'}
     nu = 8.0 / 1400.0
@@ -110,6 +112,39 @@ def test_save_load_apply_to_mantaflow(ctx):
     obj.scale = (2.0, 2.0, 2.0)
     ctx.view_layer.update()
     assert ds.viscosity_value == pytest.approx(nu * 0.4 / 0.4 ** 2, rel=1e-6)
+
+
+@pytest.mark.engine
+def test_a_shear_thinning_fluid_reaches_mantaflow_at_the_typical_shear_rate(ctx, tmp_work, engine_path, use_engine):
+    """Mantaflow's viscosity is one constant: a power law goes to it as K γ̇^(n−1) at γ̇ = √(g/L) of
+    the domain, by the engine's law, and the panel says so."""
+    use_engine(engine_path)
+    fluid = ctx.scene.viscoscope.fluid
+    fluid.model, fluid.consistency, fluid.flow_index, fluid.density = 'POWER_LAW', 7.86, 0.4, 1420.0
+    fluid.viscosity = 1000.0  # not what a power law flows with: Apply must not use it
+    obj, ds = _domain(ctx, size=0.15)
+    assert bpy.ops.viscoscope.apply_to_domain() == {'FINISHED'}
+    rate = math.sqrt(9.81 / 0.15)
+    eta = 7.86 * rate ** (0.4 - 1)
+    assert obj[mantaflow.SHEAR_RATE_KEY] == pytest.approx(rate, rel=1e-6)
+    assert obj[mantaflow.SHEAR_VISCOSITY_KEY] == pytest.approx(eta, rel=1e-6)
+    assert ds.viscosity_base * 10.0 ** -ds.viscosity_exponent == pytest.approx(eta / 1420.0, rel=1e-6)
+    assert ds.viscosity_value == pytest.approx(eta / 1420.0 * 0.4 / 0.15 ** 2, rel=1e-5)
+    # Newtonian again: the stand-in is gone and η is the material's.
+    fluid.model, fluid.viscosity = 'NEWTONIAN', 8.0
+    assert bpy.ops.viscoscope.apply_to_domain() == {'FINISHED'}
+    assert mantaflow.SHEAR_VISCOSITY_KEY not in obj
+    assert ds.viscosity_base * 10.0 ** -ds.viscosity_exponent == pytest.approx(8.0 / 1420.0, rel=1e-6)
+
+
+def test_a_shear_dependent_fluid_without_the_engine_is_refused_in_one_line(ctx, tmp_work, use_engine):
+    use_engine(str(tmp_work / "no-engine"))
+    ctx.scene.viscoscope.fluid.model = 'HERSCHEL_BULKLEY'
+    obj, ds = _domain(ctx, size=0.15)
+    before = ds.viscosity_value
+    with pytest.raises(RuntimeError, match="engine"):
+        bpy.ops.viscoscope.apply_to_domain()
+    assert ds.viscosity_value == before
 
 
 def test_domain_size_comes_from_the_domain_box_not_the_evaluated_liquid(ctx):

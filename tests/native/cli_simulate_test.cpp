@@ -211,6 +211,31 @@ int simulateUntil(const std::string& scenePath, const fs::path& out, const fs::p
 
 }  // namespace
 
+// `viscosity` answers with the solver's law: a power law's K γ̇^(n−1) at the asked rate, a Newtonian
+// liquid's η whatever the rate; a rate that is no rate is refused in one line.
+TEST_F(SimulateCommand, ViscosityIsTheMaterialLawAtAShearRate) {
+    json scene = smallScene();
+    scene["material"]["model"] = {{"type", "power_law"}, {"consistency", 7.86}, {"flow_index", 0.4}};
+    const fs::path powerLaw = write(scene);
+    const CommandResult r = viscoscope::cli_test::runViscoscope("viscosity " + powerLaw.string() + " --shear-rate 9", dir_);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const json answer = json::parse(r.out);
+    EXPECT_NEAR(answer.at("viscosity_pa_s").get<double>(), 7.86 * std::pow(9.0, -0.6), 1e-9);
+    EXPECT_TRUE(answer.at("shear_dependent").get<bool>());
+    for (const char* rate : {"0", "-1", "nan"}) {
+        const CommandResult bad =
+            viscoscope::cli_test::runViscoscope("viscosity " + powerLaw.string() + " --shear-rate " + rate, dir_);
+        EXPECT_EQ(bad.exitCode, 2) << rate;
+        EXPECT_NE(bad.err.find("--shear-rate"), std::string::npos) << bad.err;
+        EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1) << bad.err;
+    }
+    scene["material"].erase("model");
+    const CommandResult newtonian =
+        viscoscope::cli_test::runViscoscope("viscosity " + write(scene).string() + " --shear-rate 100", dir_);
+    ASSERT_EQ(newtonian.exitCode, 0) << newtonian.err;
+    EXPECT_EQ(json::parse(newtonian.out).at("viscosity_pa_s").get<double>(), scene["material"]["viscosity"].get<double>());
+}
+
 TEST_F(SimulateCommand, SigtermStopsCleanlyWithExitThree) {
     json scene = smallScene();
     scene["frames"] = 100000;

@@ -28,5 +28,6 @@ Command addSynthCommand(CLI::App& app);
 Command addCompareCommand(CLI::App& app);
 Command addSchemaCommand(CLI::App& app);
 Command addCheckCommand(CLI::App& app);
+Command addViscosityCommand(CLI::App& app);
 
 }  // namespace viscoscope::cli

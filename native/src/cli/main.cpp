@@ -38,6 +38,7 @@ int main(int argc, char** argv) {
         cli::addCompareCommand(app),
         cli::addSchemaCommand(app),
         cli::addCheckCommand(app),
+        cli::addViscosityCommand(app),
     };
 
     try {

@@ -31,4 +31,8 @@ double MaterialLaw::viscosity(double shearRate) const {
                       material_.model);
 }
 
+double apparentViscosity(const Material& material, double shearRate) {
+    return MaterialLaw(material).viscosity(shearRate);
+}
+
 }  // namespace viscoscope::sim

@@ -37,6 +37,10 @@ namespace viscoscope::sim {
 class SolidField;
 class MaterialLaw;
 
+// The material's dynamic viscosity (Pa·s) at shear rate γ̇ = √(2 D:D) (1/s), as the solver's law
+// gives it per stress sample.
+double apparentViscosity(const Material& material, double shearRate);
+
 struct Particles {
     std::vector<Vec3> position;
     std::vector<Vec3> velocity;
