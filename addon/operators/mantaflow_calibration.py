@@ -12,6 +12,7 @@ import os
 import bpy
 
 from .. import engine, mantaflow, prefs, scene_export, units
+from . import fluid as fluid_ops
 from .identify import identify_dir
 from .runner import EngineOperator, is_running
 
@@ -49,17 +50,21 @@ def reference_silhouettes(scene):
     raise scene_export.ExportError("no reference silhouettes: run Identify or Preview Silhouettes first")
 
 
-def formula_value(scene, domain):
-    """What Apply to Mantaflow Domain would set, before clamping: ν·0.4 s/L²."""
+def formula_value(context, domain):
+    """What Apply to Mantaflow Domain would set, before clamping: ν·0.4 s/L², and the η it takes
+    (a shear-dependent material's at the typical shear rate)."""
+    scene = context.scene
     fluid = scene.viscoscope.fluid
-    nu = units.kinematic_viscosity(fluid.viscosity, fluid.density)
+    stand_in = fluid_ops.mantaflow_stand_in(context, domain)
+    eta = fluid.viscosity if stand_in is None else stand_in[1]
+    nu = units.kinematic_viscosity(eta, fluid.density)
     try:
         value, _clamped = mantaflow.variational_value(domain, nu, scene.unit_settings.scale_length)
     except mantaflow.DomainError as exc:
         raise scene_export.ExportError(str(exc)) from exc
     if not value > 0:
         raise scene_export.ExportError("the Fluid Material's viscosity is 0: set η before calibrating")
-    return value
+    return value, eta
 
 
 def driver_args(exe, copy, domain_name, reference, camera, scene_json, formula, out_dir, time_offset, threads=0):
@@ -113,7 +118,7 @@ class VISCOSCOPE_OT_calibrate_mantaflow(EngineOperator, bpy.types.Operator):
         cam = vs.camera or scene.camera
         if cam is None or cam.type != 'CAMERA':
             raise scene_export.ExportError("no camera: choose one in the Camera section")
-        formula = formula_value(scene, domain)
+        formula, eta = formula_value(context, domain)
         folder = calibration_dir(scene)
         os.makedirs(folder, exist_ok=True)
         camera_json = os.path.join(folder, "blender_camera.json")
@@ -127,7 +132,7 @@ class VISCOSCOPE_OT_calibrate_mantaflow(EngineOperator, bpy.types.Operator):
             reason = str(exc).strip().splitlines()[-1]
             raise engine.EngineError("cannot save a copy of the .blend: %s" % reason) from exc
         self.note = "From the formula's viscosity_value %.4g (η %.4g Pa·s, ρ %.4g kg/m³), resolution %d" % (
-            formula, vs.fluid.viscosity, vs.fluid.density, mantaflow.domain_settings(domain).resolution_max)
+            formula, eta, vs.fluid.density, mantaflow.domain_settings(domain).resolution_max)
         out_dir = os.path.join(folder, "out")
         return driver_args(exe, copy, domain.name, reference, camera_json, scene_json, formula, out_dir,
                            vs.time_offset, prefs.threads(context)), out_dir
