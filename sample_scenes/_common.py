@@ -72,10 +72,15 @@ def set_fluid(scene, values):
     return fluid
 
 
-def load_preset(path):
-    """The scene's Fluid Material from a preset file, as the panel's preset menu loads it."""
-    if bpy.ops.viscoscope.fluid_preset_load(filepath=os.path.abspath(path)) != {'FINISHED'}:
-        raise SystemExit("error: could not load the fluid preset %s" % path)
+def use_fluid(scene, fluid):
+    """The scene's Fluid Material from `fluid`: fluid property → value, or a preset file's path,
+    loaded as the panel's preset menu loads it."""
+    if not isinstance(fluid, str):
+        set_fluid(scene, fluid)
+        return
+    if not os.path.isfile(fluid):
+        raise SystemExit("error: --preset: no such file: %s" % fluid)
+    run_operator(bpy.ops.viscoscope.fluid_preset_load, "--preset", filepath=os.path.abspath(fluid))
 
 
 def add_camera(scene, location, target, lens=50.0):
@@ -198,11 +203,21 @@ def make_effector(obj):
     return mod
 
 
+def run_operator(operator, what, *args, why=None, **kwargs):
+    """Run a Viscoscope operator; one line and exit when it fails (in the background Blender
+    raises its error report as a RuntimeError: its last line, after "Error: ", is the reason;
+    why() gives it for an operator that returns CANCELLED)."""
+    try:
+        result = operator(*args, **kwargs)
+    except RuntimeError as exc:
+        raise SystemExit("error: %s: %s" % (what, str(exc).strip().splitlines()[-1].split("Error: ", 1)[-1])) from None
+    if result != {'FINISHED'}:
+        raise SystemExit("error: %s failed%s" % (what, ": " + why() if why else ""))
+
+
 def apply_preset_to_domain(dom):
     bpy.context.view_layer.objects.active = dom
-    result = bpy.ops.viscoscope.apply_to_domain()
-    if result != {'FINISHED'}:
-        raise SystemExit("error: applying the fluid to the domain failed")
+    run_operator(bpy.ops.viscoscope.apply_to_domain, "applying the fluid to the domain")
 
 
 def bake(dom):
@@ -259,10 +274,9 @@ def simulate(scene, dom, solver, work_dir):
     if solver == "mantaflow":
         bake(dom)
         return
-    vs = scene.viscoscope
-    vs.work_dir = work_dir
-    if bpy.ops.viscoscope.simulate('EXEC_DEFAULT') != {'FINISHED'}:
-        raise SystemExit("error: the Viscoscope simulation failed: %s" % vs.simulate_job.error)
+    scene.viscoscope.work_dir = work_dir
+    run_operator(bpy.ops.viscoscope.simulate, "the Viscoscope simulation", 'EXEC_DEFAULT',
+                 why=lambda: scene.viscoscope.simulate_job.error)
 
 
 def run_name(args):

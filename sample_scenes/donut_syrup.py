@@ -36,10 +36,7 @@ POUR_SECONDS = 1.0   # how long the Viscoscope emitter pours (Mantaflow's inflow
 def build(fluid, solver="mantaflow", res=32, frames=20, cache_dir=None):
     """The scene with `fluid` (fluid property → value, or a preset file's path) in its Fluid Material."""
     scene = _common.empty_scene()
-    if isinstance(fluid, str):
-        _common.load_preset(fluid)
-    else:
-        _common.set_fluid(scene, fluid)
+    _common.use_fluid(scene, fluid)
     dough = _common.simple_material("Dough", (0.78, 0.5, 0.25), 0.6)
     plate_mat = _common.simple_material("Plate", (0.9, 0.9, 0.88), 0.2)
     # A 9 cm donut on a plate, in metres.

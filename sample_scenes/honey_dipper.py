@@ -59,10 +59,7 @@ def dipper(scene, material):
 def build(fluid, solver="mantaflow", res=32, frames=20, cache_dir=None):
     """The scene with `fluid` (fluid property → value, or a preset file's path) in its Fluid Material."""
     scene = _common.empty_scene()
-    if isinstance(fluid, str):
-        _common.load_preset(fluid)
-    else:
-        _common.set_fluid(scene, fluid)
+    _common.use_fluid(scene, fluid)
     wood = _common.simple_material("Wood", (0.55, 0.33, 0.15), 0.6)
     ceramic = _common.simple_material("Bowl", (0.2, 0.3, 0.45), 0.3)
     stick = dipper(scene, wood)
