@@ -140,9 +140,9 @@ def _particles(path):
 
 
 def _sample_scene_with_preset(script, preset_path, out, engine_path):
-    scene_name = {"donut_syrup.py": "donut", "honey_dipper.py": "honey_dipper"}[script]
     """Run a sample transfer scene as a user would, with a preset file on the Viscoscope engine; the
     material the engine simulated and the liquid's particles at the last frame."""
+    scene_name = {"donut_syrup.py": "donut", "honey_dipper.py": "honey_dipper"}[script]
     env = dict(os.environ, VISCOSCOPE_ENGINE=engine_path)
     proc = subprocess.run([bpy.app.binary_path, "-b", "--factory-startup", "--python-exit-code", "1", "--python",
                            os.path.join(conftest.REPO, "sample_scenes", script), "--", "--out", str(out),
