@@ -234,11 +234,8 @@ def transfer_domain(scene, lo, hi, res, frames, solver, cache_dir=None):
     if solver == "mantaflow":
         dom = make_domain(scene, lo, hi, res, frames, cache_dir=cache_dir)
     else:
-        corners = ((lo[0], hi[0]), (lo[1], hi[1]), (lo[2], hi[2]))
-        dom = add_mesh_object(scene, "Fluid Domain", [(x, y, z) for x in corners[0] for y in corners[1]
-                                                      for z in corners[2]], [])
-        dom.display_type = 'BOUNDS'
-        dom.hide_render = True
+        from viscoscope.operators import container
+        dom = container.add_domain(bpy.context, lo, hi, name="Fluid Domain")
         scene.frame_start, scene.frame_end = 1, frames
     dom.viscoscope.role = 'DOMAIN'
     scene.viscoscope.sim_resolution, scene.viscoscope.sim_frames = res, frames
