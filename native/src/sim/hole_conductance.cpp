@@ -6,6 +6,7 @@
 #include <cmath>
 #include <map>
 #include <mutex>
+#include <optional>
 
 namespace viscoscope::sim {
 
@@ -116,10 +117,19 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
     // One implicit step from rest 10³ viscous times across the box long is the steady flow.
     const double dt = 1e3 * std::pow(dx * box.domain.resolution, 2);
     const double dagan = daganFlux(2 * reach, 1.0, r, t);
+    // Each solve after the first starts from the last one's pressure and stresses: the drag changes
+    // only the faces in the hole, and from rest the later solves took the most iterations.
+    std::optional<StokesState> lastSolve;
     auto fluxOverDagan = [&](double resistance) {
         Simulation simulation(box);
         simulation.setHoleResistance(plate, resistance);
+        if (lastSolve) {
+            simulation.state_.pressure = lastSolve->pressure;
+            for (int a = 0; a < 3; ++a) simulation.state_.normalStress[a] = lastSolve->normalStress[a];
+            simulation.state_.shearStress = lastSolve->shearStress;
+        }
         simulation.step(dt);
+        lastSolve = simulation.state_;
         return simulation.downwardFlux(bottom + 0.5 * t) / dagan;
     };
     // 1/Q's shortfall from the free exit's; the drag raises 1/Q about linearly, as a resistance in

@@ -208,6 +208,9 @@ struct CgResult {
 // Jacobi-preconditioned conjugate gradient on a matrix-free SPD operator, from the guess in x.
 // Written here rather than Eigen::ConjugateGradient because the operator is a product of three
 // factors that is never assembled, and Eigen's matrix-free path needs a wrapper longer than this loop.
+// Jacobi because it won: on the sample cup's time steps (48³ at η 8 and 300, 96³ at 8) incomplete
+// Cholesky and hypre's BoomerAMG took 2–11× fewer iterations but 1.7–8× longer in all
+// (tests/bench/FINDINGS.md, "Preconditioners for the unified solve").
 CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, const Vec& diagonal,
                            const Vec& b, Vec& x, double tolerance, int maxIterations) {
     CgResult result;
