@@ -46,8 +46,11 @@ def main() -> int:
         for repeat in range(args.repeats):
             for name, engine in (("before", args.before), ("after", args.after)):
                 start = time.monotonic()
-                subprocess.run([engine, "simulate", str(scene_file), "--out", str(pathlib.Path(work) / name),
-                                "--progress", "none"], check=True)
+                # A fresh directory each run: `simulate` keeps a completed run of the same scene
+                # by the same build and would return at once.
+                out = pathlib.Path(work) / f"{name}_{repeat}"
+                subprocess.run([engine, "simulate", str(scene_file), "--out", str(out), "--progress", "none"],
+                               check=True)
                 seconds[name].append(time.monotonic() - start)
                 print(f"repeat {repeat + 1} {name:6s} {seconds[name][-1]:7.2f} s", flush=True)
     before, after = statistics.median(seconds["before"]), statistics.median(seconds["after"])
