@@ -296,9 +296,10 @@ def identify_args(engine, job_path, out_dir, threads=0):
         _threads(engine, "identify", threads)
 
 
-def diagnose_args(engine, job_path, out_dir, threads=0):
-    return [engine, "diagnose", job_path, "--out", out_dir, "--progress", "json"] + \
-        _threads(engine, "diagnose", threads)
+def diagnose_args(engine, job_path, out_dir, threads=0, time_budget_s=0.0):
+    """`time_budget_s` for the whole diagnosis (0: each fit has the job's own)."""
+    return [engine, "diagnose", job_path, "--out", out_dir, "--progress", "json",
+            "--time-budget", "%g" % time_budget_s] + _threads(engine, "diagnose", threads)
 
 
 # A job's "extraction" names (observe.h, parseExtractionOptions) → `extract`'s options, so that the

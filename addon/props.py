@@ -227,6 +227,10 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     time_budget_minutes: FloatProperty(name="Time Budget (min)", default=10.0, min=0.0, max=10000.0,
                                        description="Wall time for the whole identification; the engine stops "
                                                    "before a generation that would overrun it (0 = no limit)")
+    diagnosis_budget_minutes: FloatProperty(name="Time Budget (min)", default=30.0, min=0.0, max=10000.0,
+                                            description="Wall time for the whole diagnosis, shared by its fits "
+                                                        "(the base and each effect); 0 = each fit has the "
+                                                        "Identify panel's time budget")
     # Results
     result_eta: FloatProperty(name="η", default=0.0, precision=4)
     result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)

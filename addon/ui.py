@@ -291,7 +291,8 @@ class VIEW3D_PT_viscoscope_diagnose(_ViscoscopePanel, bpy.types.Panel):
         vs = context.scene.viscoscope
         draw_message(layout, context, "Fits the Identify panel's job and each effect the model may lack "
                                       "(shear thinning, a yield stress, wall slip, side walls): one "
-                                      "identification each, within its time budget")
+                                      "identification each, sharing the time budget")
+        layout.prop(vs, "diagnosis_budget_minutes")
         draw_job(layout, context, "diagnose", "viscoscope.diagnose", "Diagnose",
                  resume_op="viscoscope.diagnose_resume")
         if not vs.diagnosis_conclusion:

@@ -63,7 +63,8 @@ def read_diagnosis(context, out_dir):
     after = next((m for m in models[1:] if m["model"] == chosen), None) if chosen else doc["base"]
     if after is None:
         raise ValueError("%s chose %r, which is not among its candidates" % (path, chosen))
-    lines = [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
+    lines = ["Warning: %s" % w for w in doc.get("warnings", ())]
+    lines += [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
     lines += ["%s not tried: %s" % (n["effect"], n["why"]) for n in doc.get("not_tried", ())]
     geometry = [name for name in after["parameters"] if name.startswith("solids[")] if chosen else []
     if geometry:
@@ -126,7 +127,13 @@ class _DiagnoseBase(JobOperator):
     run_name = "diagnosis"
 
     folder = staticmethod(diagnose_dir)
-    engine_args = staticmethod(engine.diagnose_args)
+
+    def prepare(self, context):
+        self.time_budget_s = 60.0 * context.scene.viscoscope.diagnosis_budget_minutes
+        return super().prepare(context)
+
+    def engine_args(self, exe, job, out_dir, threads):
+        return engine.diagnose_args(exe, job, out_dir, threads, time_budget_s=self.time_budget_s)
 
     def on_success(self, context, out_dir):
         read_diagnosis(context, out_dir)

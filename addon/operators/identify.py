@@ -230,7 +230,7 @@ class JobOperator(EngineOperator):
         return not is_running(cls.job_kind)
 
     folder = None  # staticmethod(scene → the folder of the job and its out/)
-    engine_args = None  # staticmethod(exe, job, out_dir, threads → the engine's arguments)
+    engine_args = None  # (exe, job, out_dir, threads) → the engine's arguments (a staticmethod or a method)
 
     def prepare(self, context):
         exe = prefs.find_engine(context)

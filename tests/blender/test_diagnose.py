@@ -130,6 +130,9 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
     # fits the fitted frames worse than the base: from their own starts, 12 generations left the power
     # law's 3.8 times worse.
     diagnosis = json.load(open(os.path.join(out_dir, "diagnosis.json")))
+    # The panel's budget is the whole diagnosis's, shared by its fits.
+    assert diagnosis["time_budget_s"] == pytest.approx(60 * vs.diagnosis_budget_minutes)
+    assert diagnosis["base"]["time_budget_s"] == pytest.approx(60 * vs.diagnosis_budget_minutes / 4)
     for candidate in diagnosis["candidates"]:
         limit = (1 + 1e-9 if candidate["model"] == "shear_thinning" else 1.02) * diagnosis["base"]["fitted_E"]
         assert candidate["fitted_E"] <= limit, candidate["model"]

@@ -271,7 +271,8 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
 // otherwise: it is refused at once, naming the process; once that process is gone (even by kill -9,
 // which leaves the lock file behind) the folder is free again.
 // diagnose refuses in one line, before any fit: an effect it does not know, one the job cannot take
-// when asked for by name, and a reference too short to hold frames out of the fit.
+// when asked for by name, a time budget that is no number of seconds, and a reference too short to
+// hold frames out of the fit.
 TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
     const auto expectRefused = [&](const std::string& arguments, const fs::path& jobFile, const std::string& fragment) {
         const CommandResult r = run("diagnose " + jobFile.string() + " --out " + (dir_ / "diagnosis").string() +
@@ -289,6 +290,8 @@ TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
     const fs::path jobFile = writeJob(doc);
     expectRefused("--effects elasticity", jobFile, "unknown effect \"elasticity\"");
     expectRefused("--effects side_walls", jobFile, "side_walls: the scene has no channel solid");
+    expectRefused("--time-budget nan", jobFile, "the time budget must be a finite number of seconds ≥ 0");
+    expectRefused("--time-budget=-60", jobFile, "the time budget must be a finite number of seconds ≥ 0");
     // Two masks (frames 2 and 4): nothing left to predict after the three a fit needs at least.
     expectRefused("", writeJob(job(), "short.json"), "compared frames, too few to fit 3 and predict at least 2 more");
 }

@@ -180,6 +180,50 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
     fs::remove_all(root);
 }
 
+// A budget for the whole diagnosis is shared by its fits: the first gets an equal share, each later
+// one what the fits before it left, less the scoring the one before took; a budget far under a
+// generation stops every search at the minimum generations, by the budget.
+TEST(FilmDiagnosis, SharesItsTimeBudgetAmongTheFits) {
+    const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_budget_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", 50.0}});
+    const json job = {{"format", "viscoscope.job"},
+                      {"version", 1},
+                      {"scene", "scene.json"},
+                      {"forward_model", "thin_film"},
+                      {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
+                      {"parameters", {{{"name", "viscosity"}, {"initial", 20}, {"spread", 20}, {"min", 0.1}, {"max", 1e4}}}},
+                      {"max_generations", 60},
+                      {"seed", 5}};
+    std::ofstream(dir / "job.json") << job.dump();
+    identify::DiagnoseOptions options;
+    options.timeBudget = 0.01;
+    const identify::Diagnosis d = identify::diagnose(identify::loadJob(dir / "job.json"), dir / "out", options);
+    const double fits = 1.0 + d.candidates.size();
+    EXPECT_DOUBLE_EQ(d.base.timeBudget, options.timeBudget / fits);
+    double spent = d.base.seconds + d.base.scoringSeconds, lastScoring = d.base.scoringSeconds;
+    for (size_t c = 0; c < d.candidates.size(); ++c) {
+        const identify::ModelFit& fit = d.candidates[c];
+        EXPECT_DOUBLE_EQ(fit.timeBudget, std::max(1e-3, (options.timeBudget - spent) / (fits - 1 - c) - lastScoring)) << fit.model;
+        spent += fit.seconds + fit.scoringSeconds;
+        lastScoring = fit.scoringSeconds;
+    }
+    for (const identify::ModelFit* fit : [&] {
+             std::vector<const identify::ModelFit*> all{&d.base};
+             for (const identify::ModelFit& c : d.candidates) all.push_back(&c);
+             return all;
+         }()) {
+        ASSERT_TRUE(fit->stop.has_value()) << fit->model;
+        EXPECT_EQ(*fit->stop, identify::StopReason::TimeBudget) << fit->model << ": " << fit->evaluations << " evaluations";
+    }
+    EXPECT_EQ(d.document.at("time_budget_s").get<double>(), options.timeBudget);
+    // Overspent, since every search made its minimum generations: said in diagnosis.json.
+    ASSERT_EQ(d.document.at("warnings").size(), 1u);
+    EXPECT_NE(d.document.at("warnings")[0].get<std::string>().find("s budget: each search makes at least 2 generations"),
+              std::string::npos);
+    fs::remove_all(dir);
+}
+
 // With η fixed at an independent reading (a viscometer's), the slip the radius alone hides shows:
 // the film spreads faster than that η allows, and only slip explains it. identify refuses such a job
 // (nothing to search); diagnose holds the base at the fixed value and fits the slip length alone.

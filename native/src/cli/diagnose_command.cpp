@@ -21,6 +21,7 @@ struct DiagnoseArguments {
     std::string job, outDir, progress = "text";
     int threads = 0;
     double fitShare = 2.0 / 3;
+    double timeBudget = 0;
     std::vector<std::string> effects;
     bool noPlots = false;
 };
@@ -33,6 +34,7 @@ int runDiagnose(const DiagnoseArguments& args) {
     identify::DiagnoseOptions options;
     options.fitShare = args.fitShare;
     options.effects = args.effects;
+    options.timeBudget = args.timeBudget;
     options.identify.threads = args.threads;
     options.identify.onWarning = [&](const std::string& warning) { progress.warn(warning); };
     std::string model;
@@ -81,6 +83,9 @@ Command addDiagnoseCommand(CLI::App& app) {
     sub->add_option("--threads", args->threads, "Worker threads (0 = all cores)")->check(CLI::NonNegativeNumber);
     sub->add_option("--fit-share", args->fitShare, "Share of each run's compared frames fitted; the rest is predicted")
         ->check(CLI::Range(0.1, 0.9))
+        ->capture_default_str();
+    sub->add_option("--time-budget", args->timeBudget,
+                    "Wall seconds for the whole diagnosis, shared by its fits (0 = each fit has the job's time_budget_s)")
         ->capture_default_str();
     sub->add_option("--effects", args->effects, "Candidate effects (default: every one the scene can hold): " + effects.str())
         ->delimiter(',');

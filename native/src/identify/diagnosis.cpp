@@ -8,9 +8,11 @@
 // BIC over the fitted frames is below the base's; of those, the one with the least held-out E.
 #include "identify/diagnosis.h"
 
+#include "identify/search_state.h"
 #include "sim/sim.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 namespace viscoscope::identify {
@@ -272,14 +274,38 @@ std::vector<double> baseEquivalent(const Job& model, const Job& base, const std:
     return theta;
 }
 
-// Fits a model to the fitted frames (scoring `knownPoint` too, if given), then scores θ* on every
-// frame of every run.
-ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting, const std::vector<Observation>& observations,
+// The diagnosis's time budget, spent fit by fit: each search gets an equal share of what is left,
+// less the scoring the fit before it took (the next one's scoring costs about as much).
+class FitBudget {
+  public:
+    FitBudget(double total, int fits) : total_(total), fitsLeft_(fits) {}
+    // 0: no budget of the diagnosis's own (the job's time_budget_s stands). Never 0 otherwise, which
+    // would mean none: an overspent budget still runs the minimum generations (and identify warns).
+    double nextSearch() const {
+        return total_ > 0 ? std::max(1e-3, (total_ - spent_) / std::max(1, fitsLeft_) - lastScoring_) : 0.0;
+    }
+    void spend(const ModelFit& fit) {
+        spent_ += fit.seconds + fit.scoringSeconds;
+        lastScoring_ = fit.scoringSeconds;
+        --fitsLeft_;
+    }
+    double spent() const { return spent_; }
+
+  private:
+    double total_, spent_ = 0, lastScoring_ = 0;
+    int fitsLeft_;
+};
+
+// Fits a model to the fitted frames (scoring `knownPoint` too, if given) within `searchBudget` wall
+// seconds (0: the job's), then scores θ* on every frame of every run.
+ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const std::vector<Observation>& observations,
                   const std::vector<int>& fitCounts, const fs::path& dir, const DiagnoseOptions& options,
-                  const std::vector<double>& knownPoint, json& runSeries) {
+                  const std::vector<double>& knownPoint, double searchBudget, json& runSeries) {
     ModelFit fit;
     fit.model = model;
     for (const ParameterSpec& p : full.parameters) fit.parameters.push_back(p.name());
+    if (searchBudget > 0) fitting.timeBudget = searchBudget;
+    fit.timeBudget = fitting.timeBudget;
     // A base with every unknown fixed has nothing to fit: it is scored where it is held.
     if (!fitting.parameters.empty()) {
         IdentifyOptions identifyOptions = options.identify;
@@ -290,11 +316,13 @@ ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting,
         fit.interval = result.interval;
         fit.evaluations = result.evaluations;
         fit.seconds = result.seconds;
+        fit.stop = result.stop;
     }
     fit.material = sceneToJson(sceneWithParameters(full, fit.theta, full.resolution)).at("material");
     const std::vector<Job> runs = runsOf(full);
     int fittedFrames = 0;
     runSeries = json::array();
+    const auto scoringStart = std::chrono::steady_clock::now();
     for (size_t r = 0; r < runs.size(); ++r) {
         const RunScore score = scoreRun(runs[r], observations[r], fit.theta, fitCounts[r]);
         fit.fittedE += score.fitted;
@@ -304,6 +332,7 @@ ModelFit fitModel(const std::string& model, const Job& full, const Job& fitting,
         if (r == 0) fit.trackError = score.trackError;
         runSeries.push_back(score.series);
     }
+    fit.scoringSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - scoringStart).count();
     const double n = fittedFrames, k = double(fit.theta.size());
     fit.bic = n * std::log(std::max(fit.fittedE, 1e-300) / n) + k * std::log(n);
     return fit;
@@ -315,9 +344,11 @@ json toJson(const ModelFit& fit, const json& series) {
         parameters[fit.parameters[i]] = {{"value", fit.theta[i]}, {"interval", fit.interval[i]}};
     json doc{{"model", fit.model},         {"parameters", parameters},   {"fitted_E", fit.fittedE},
              {"held_out_E", fit.heldOutE}, {"whole_E", fit.wholeE},      {"bic", fit.bic},
-             {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"material", fit.material},
+             {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"scoring_seconds", fit.scoringSeconds},
+             {"time_budget_s", fit.timeBudget},   {"material", fit.material},
              {"residual_over_time", series}};
     if (fit.trackError) doc["track_error"] = *fit.trackError;
+    if (fit.stop) doc["stopped"] = toString(*fit.stop);
     return doc;
 }
 
@@ -331,6 +362,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     for (const std::string& effect : options.effects)
         if (std::none_of(kEffects.begin(), kEffects.end(), [&](const Effect& e) { return effect == e.name; }))
             throw InputError("diagnose: unknown effect \"" + effect + "\" (shear_thinning, yield_stress, wall_slip, side_walls)");
+    if (!(options.timeBudget >= 0 && std::isfinite(options.timeBudget)))
+        throw InputError("diagnose: the time budget must be a finite number of seconds ≥ 0 (0 = each fit's job budget), got " +
+                         formatNumber(options.timeBudget));
     fs::create_directories(outDir);
     Job job = jobIn;
     prepareReference(job, outDir);
@@ -376,8 +410,10 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         for (const ParameterSpec& p : job.parameters) names.push_back(p.name());
         options.onFit("base", 0, fits, names);
     }
+    FitBudget budget(options.timeBudget, fits);
     diagnosis.base = fitModel("base", job, modelJob(job, "", {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
-                              options, {}, baseSeries);
+                              options, {}, budget.nextSearch(), baseSeries);
+    budget.spend(diagnosis.base);
     json candidatesDoc = json::array();
     std::vector<json> candidateSeries;
     for (size_t c = 0; c < candidates.size(); ++c) {
@@ -402,7 +438,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         json series;
         diagnosis.candidates.push_back(fitModel(name, full, modelJob(base, name, parameters, fitCounts), observations,
                                                 fitCounts, outDir / "fits" / name, options,
-                                                baseEquivalent(full, job, diagnosis.base.theta), series));
+                                                baseEquivalent(full, job, diagnosis.base.theta), budget.nextSearch(),
+                                                series));
+        budget.spend(diagnosis.candidates.back());
         candidateSeries.push_back(series);
     }
 
@@ -418,6 +456,16 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         entry["held_out_gain"] = base.heldOutE > 0 ? 1 - fit.heldOutE / base.heldOutE : 0.0;
         entry["earns_its_parameters"] = earns;
         candidatesDoc.push_back(entry);
+    }
+    // Each search makes its minimum generations whatever its share, so a diagnosis can end late: say
+    // so, with what would take less.
+    json warnings = json::array();
+    if (options.timeBudget > 0 && budget.spent() > options.timeBudget) {
+        warnings.push_back("diagnose: the fits took " + wholeSeconds(budget.spent()) + " s of a " +
+                           wholeSeconds(options.timeBudget) + " s budget: each search makes at least " +
+                           std::to_string(job.fidelity.minFineGenerations) +
+                           " generations (a coarser grid, a shorter clip or fewer --effects take less)");
+        if (options.identify.onWarning) options.identify.onWarning(warnings.back());
     }
     json notTried = json::array();
     for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
@@ -437,6 +485,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                           "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +
                           " % of the base's and its BIC over the fitted frames is below the base's"},
         {"fitted_frames", fitCounts},
+        {"time_budget_s", options.timeBudget},
+        {"seconds", budget.spent()},
+        {"warnings", warnings},
         {"base", toJson(base, baseSeries)},
         {"candidates", candidatesDoc},
         {"not_tried", notTried},

@@ -32,6 +32,10 @@ struct DiagnoseOptions {
     // The share of each run's compared frames fitted; the later rest is predicted and scored.
     double fitShare = 2.0 / 3;
     std::vector<std::string> effects;  // the candidates; empty: every effect the scene can hold
+    // Wall seconds for the whole diagnosis (0: each fit has the job's own time_budget_s). Each fit's
+    // search gets an equal share of what the fits before it left, less the time its scoring on
+    // every frame is predicted to take.
+    double timeBudget = 0;
     // Before each fit: its model ("base" or an effect's name), its index, the number of fits and the
     // parameters it searches.
     std::function<void(const std::string& model, int index, int count, const std::vector<std::string>& parameters)> onFit;
@@ -49,7 +53,10 @@ struct ModelFit {
     double bic = 0;        // N ln(fittedE / N) + k ln N over the N fitted frames
     std::optional<double> trackError;  // relative L2 of the measured track over all frames (first run)
     long evaluations = 0;
-    double seconds = 0;
+    double seconds = 0;          // the search's
+    double scoringSeconds = 0;   // θ* simulated again over every frame of every run
+    double timeBudget = 0;       // the search's share of the diagnosis's budget (0: the job's own)
+    std::optional<StopReason> stop;  // why the search ended; none when there was nothing to search
     // The material θ* implies, as a scene file's "material" holds it: what the add-on applies.
     nlohmann::json material;
 };
