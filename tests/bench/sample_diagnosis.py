@@ -13,7 +13,7 @@ within 30 minutes on a 2-core machine).
    search and scoring seconds, held-out E and BIC, and the conclusion.
 
     /usr/bin/python3 tests/bench/sample_diagnosis.py [--budget 1800] [--resolution 48] [--hidden JSON]
-        [--work DIR] [--threads N]
+        [--effects a,b] [--work DIR] [--threads N]
 """
 import argparse
 import json
@@ -40,6 +40,7 @@ def main():
     parser.add_argument("--resolution", type=int, default=48, help="the diagnosis's grid")
     parser.add_argument("--hidden", help="the clip's material model as a scene's material.model (JSON)")
     parser.add_argument("--threads", type=int, default=0, help="engine threads (0 = all cores)")
+    parser.add_argument("--effects", help="the candidates, comma-separated (default: every one the cup can hold)")
     parser.add_argument("--work", default=str(ROOT / "out/sample_diagnosis"), help="folder for the clip and results")
     args = parser.parse_args()
     work = pathlib.Path(args.work).resolve()
@@ -63,7 +64,8 @@ def main():
     (work / "job.json").write_text(json.dumps(job, indent=1))
     out = work / "diagnosis"
     seconds = run([args.engine, "diagnose", work / "job.json", "--out", out, "--time-budget", args.budget,
-                   "--threads", args.threads, "--progress", "none", "--no-plots"], "diagnose")
+                   "--threads", args.threads, "--progress", "none", "--no-plots"]
+                  + (["--effects", args.effects] if args.effects else []), "diagnose")
     report = json.loads((out / "diagnosis.json").read_text())
 
     print(f"clip: {clip_scene.name}{' with ' + args.hidden if args.hidden else ''} ({synth_seconds:.0f} s to make or "

@@ -116,6 +116,19 @@ void writeRecordAndScene(const fs::path& dir, const json& material) {
     std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}).dump();
 }
 
+// The job of DIR/scene.json against DIR/radius.csv, with the film: η searched from 20 Pa·s.
+json radiusJob() {
+    return {{"format", "viscoscope.job"},
+            {"version", 1},
+            {"scene", "scene.json"},
+            {"forward_model", "thin_film"},
+            {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
+            {"parameters", {{{"name", "viscosity"}, {"initial", 20}, {"spread", 20}, {"min", 0.1}, {"max", 1e4}}}},
+            // 30 left the Bingham fit along its K–τ_y valley, K 54 % high (FINDINGS).
+            {"max_generations", 60},
+            {"seed", 5}};
+}
+
 struct HiddenEffect {
     const char* expected;  // the effect diagnose should name; "" for none
     json material;
@@ -142,16 +155,7 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
         const fs::path dir = root / (*hidden.expected ? hidden.expected : "newtonian");
         fs::create_directories(dir);
         writeRecordAndScene(dir, hidden.material);
-        json job = {{"format", "viscoscope.job"},
-                    {"version", 1},
-                    {"scene", "scene.json"},
-                    {"forward_model", "thin_film"},
-                    {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
-                    {"parameters", {{{"name", "viscosity"}, {"initial", 20}, {"spread", 20}, {"min", 0.1}, {"max", 1e4}}}},
-                    // 30 left the Bingham fit along its K–τ_y valley, K 54 % high (FINDINGS).
-                    {"max_generations", 60},
-                    {"seed", 5}};
-        std::ofstream(dir / "job.json") << job.dump();
+        std::ofstream(dir / "job.json") << radiusJob().dump();
         const identify::Diagnosis d = identify::diagnose(identify::loadJob(dir / "job.json"), dir / "out");
         const std::string chosen = d.chosen ? d.candidates[*d.chosen].model : "";
         const identify::ModelFit& after = d.chosen ? d.candidates[*d.chosen] : d.base;
@@ -187,15 +191,7 @@ TEST(FilmDiagnosis, SharesItsTimeBudgetAmongTheFits) {
     const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_budget_" + std::to_string(::getpid()));
     fs::create_directories(dir);
     writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", 50.0}});
-    const json job = {{"format", "viscoscope.job"},
-                      {"version", 1},
-                      {"scene", "scene.json"},
-                      {"forward_model", "thin_film"},
-                      {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
-                      {"parameters", {{{"name", "viscosity"}, {"initial", 20}, {"spread", 20}, {"min", 0.1}, {"max", 1e4}}}},
-                      {"max_generations", 60},
-                      {"seed", 5}};
-    std::ofstream(dir / "job.json") << job.dump();
+    std::ofstream(dir / "job.json") << radiusJob().dump();
     identify::DiagnoseOptions options;
     options.timeBudget = 0.01;
     const identify::Diagnosis d = identify::diagnose(identify::loadJob(dir / "job.json"), dir / "out", options);
@@ -232,14 +228,9 @@ TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
     fs::create_directories(dir);
     const double eta = 50, slip = 0.003;
     writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}});
-    const json job = {{"format", "viscoscope.job"},
-                      {"version", 1},
-                      {"scene", "scene.json"},
-                      {"forward_model", "thin_film"},
-                      {"track", {{"csv", "radius.csv"}, {"column", "radius_m"}, {"observable", "radius"}, {"origin", {0, 0, 0}}}},
-                      {"fixed", {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}}},
-                      {"max_generations", 60},
-                      {"seed", 5}};
+    json job = radiusJob();
+    job.erase("parameters");
+    job["fixed"] = {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}};
     std::ofstream(dir / "job.json") << job.dump();
     const identify::Job parsed = identify::loadJob(dir / "job.json");
     EXPECT_THROW(identify::identify(parsed, dir / "identify"), InputError);
