@@ -280,7 +280,7 @@ class FitBudget {
   public:
     FitBudget(double total, int fits) : total_(total), fitsLeft_(fits) {}
     // 0: no budget of the diagnosis's own (the job's time_budget_s stands). Never 0 otherwise, which
-    // would mean none: an overspent budget still runs the minimum generations (and identify warns).
+    // would mean none: an overspent budget still runs the minimum generations (and diagnose warns).
     double nextSearch() const {
         return total_ > 0 ? std::max(1e-3, (total_ - spent_) / std::max(1, fitsLeft_) - lastScoring_) : 0.0;
     }
