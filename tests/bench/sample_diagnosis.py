@@ -13,7 +13,7 @@ within 30 minutes on a 2-core machine).
    search and scoring seconds, held-out E and BIC, and the conclusion.
 
     /usr/bin/python3 tests/bench/sample_diagnosis.py [--budget 1800] [--resolution 48] [--hidden JSON]
-        [--effects a,b] [--work DIR] [--threads N]
+        [--effects a,b] [--work DIR] [--reuse-clip] [--threads N]
 """
 import argparse
 import json
@@ -40,6 +40,9 @@ def main():
     parser.add_argument("--resolution", type=int, default=48, help="the diagnosis's grid")
     parser.add_argument("--hidden", help="the clip's material model as a scene's material.model (JSON)")
     parser.add_argument("--threads", type=int, default=0, help="engine threads (0 = all cores)")
+    parser.add_argument("--reuse-clip", action="store_true",
+                        help="diagnose WORK/synth's clip as it is (camera.json, reference.mp4, clean_plate.png) "
+                             "instead of running synth, which re-simulates after any engine change")
     parser.add_argument("--effects", help="the candidates, comma-separated (default: every one the cup can hold)")
     parser.add_argument("--work", default=str(ROOT / "out/sample_diagnosis"), help="folder for the clip and results")
     args = parser.parse_args()
@@ -53,8 +56,10 @@ def main():
         scene["material"]["model"] = json.loads(args.hidden)
         clip_scene = work / "clip_scene.json"
         clip_scene.write_text(json.dumps(scene, indent=1))
-    synth_seconds = run([args.engine, "synth", clip_scene, "--camera", ROOT / "sample_scenes/capture_camera.json",
-                         "--out", work / "synth"], "synth")
+    synth_seconds = 0.0
+    if not args.reuse_clip:
+        synth_seconds = run([args.engine, "synth", clip_scene, "--camera", ROOT / "sample_scenes/capture_camera.json",
+                             "--out", work / "synth"], "synth")
 
     job = {"format": "viscoscope.job", "version": 1, "scene": str(scene_file), "camera": "synth/camera.json",
            "video": "synth/reference.mp4",
