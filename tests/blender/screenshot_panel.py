@@ -94,7 +94,8 @@ def step():
 def start_simulation(window, area):
     import time
     scene = bpy.context.scene
-    scene.viscoscope.sim_frames = int(os.environ.get("VISCOSCOPE_SCREENSHOT_FRAMES", "30"))
+    # Long enough to span several of the main loop's ticks on a loaded machine.
+    scene.viscoscope.sim_frames = int(os.environ.get("VISCOSCOPE_SCREENSHOT_FRAMES", "90"))
     with bpy.context.temp_override(window=window, area=area):
         result = bpy.ops.viscoscope.simulate('INVOKE_DEFAULT')
     sim = state["sim"]

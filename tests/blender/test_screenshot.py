@@ -24,6 +24,28 @@ def _artifacts(tmp_path):
     return folder
 
 
+def _run_window(command, tmp_path):
+    """Runs Blender's window; once more if Blender itself died of a signal before writing its report.
+
+    Blender 3.4 under Xvfb with simulated events crashed once in a CI run, inside its own layout code
+    (the crash log's Python frame: a panel's `layout.row()`), and not in 12 runs here. A second crash
+    fails the test; the first one's log is kept beside the screenshot either way."""
+    crash_logs = []
+    for attempt in range(2):
+        temp = tmp_path / ("blender_tmp_%d" % attempt)  # where Blender writes <blend>.crash.txt
+        temp.mkdir()
+        proc = subprocess.run(command, capture_output=True, text=True, timeout=400, env=dict(os.environ, TMPDIR=str(temp)))
+        logs = sorted(temp.glob("*.crash.txt"))
+        for log in logs:
+            kept = os.path.join(_artifacts(tmp_path), "viscoscope_panel_crash_%d.txt" % attempt)
+            shutil.copyfile(log, kept)
+            crash_logs.append("\n%s:\n%s" % (kept, log.read_text()[-1500:]))
+        if not logs:
+            break
+        print("Blender crashed (exit %s), log kept: running the window once more" % proc.returncode)
+    return proc, "".join(crash_logs)
+
+
 def test_panel_screenshot_under_xvfb(tmp_path):
     if shutil.which("xvfb-run") is None:
         pytest.skip("xvfb-run is not installed")
@@ -40,11 +62,11 @@ def test_panel_screenshot_under_xvfb(tmp_path):
             os.remove(stale)
     # With an engine, also run "Simulate with Viscoscope" through its modal operator in the window.
     simulate = ["--simulate"] if os.environ.get("VISCOSCOPE_ENGINE") else []
-    proc = subprocess.run(["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", blender, "--factory-startup",
-                           "--enable-event-simulate", "--window-geometry", "0", "0", "1600", "1000", str(blend),
-                           "--python", os.path.join(conftest.HERE, "screenshot_panel.py"), "--", out, *simulate],
-                          capture_output=True, text=True, timeout=400)
-    assert os.path.isfile(out), "no screenshot (exit %s): %s" % (proc.returncode, proc.stderr[-2000:])
+    command = ["xvfb-run", "-a", "-s", "-screen 0 1600x1000x24", blender, "--factory-startup",
+               "--enable-event-simulate", "--window-geometry", "0", "0", "1600", "1000", str(blend),
+               "--python", os.path.join(conftest.HERE, "screenshot_panel.py"), "--", out, *simulate]
+    proc, crashes = _run_window(command, tmp_path)
+    assert os.path.isfile(out), "no screenshot (exit %s): %s%s" % (proc.returncode, proc.stderr[-2000:], crashes)
     with open(os.path.splitext(out)[0] + ".json") as fh:
         report = json.load(fh)
     assert report["log"] == [], report["log"]
@@ -55,7 +77,10 @@ def test_panel_screenshot_under_xvfb(tmp_path):
         assert sim["invoke_result"] == ["RUNNING_MODAL"]  # returned at once, the engine runs outside
         assert sim["status"] == "Done" and sim["error"] == "", sim
         assert sim["imported"]
-        assert len(sim["progress_seen"]) >= 3, sim["progress_seen"]  # the panel saw progress updates
+        # The panel showed the engine's progress while it ran. How many values it caught depends on how
+        # fast the window redraws against the engine, i.e. on the machine's load (a loaded run caught
+        # only 0 and 53.3 % of 30 frames): one between 0 and 100 is what does not depend on it.
+        assert any(0 < p < 100 for p in sim["progress_seen"]), sim["progress_seen"]
         # Blender's main loop kept running while the engine worked (generous: CI machines are slow).
         assert sim["max_gap"] < 5.0, sim["max_gap"]
         assert os.path.isfile(sim["running_screenshot"])
