@@ -8,6 +8,8 @@
 #include <tbb/task_arena.h>
 
 #include <cmath>
+#include <exception>
+#include <mutex>
 #include <optional>
 
 namespace viscoscope::identify {
@@ -113,6 +115,17 @@ BatchResult ThreadPool::evaluate(const Job& job, const Observations& observation
     BatchResult result;
     result.evaluations.resize(count);
     result.errors.assign(count, "");
+    // An exception leaving a TBB body cancels its whole task group, nested algorithms included:
+    // OpenVDB's volumeToMesh in a sibling evaluation then returned a partial mesh and asked for
+    // 24 GB (a cancel during a blender_addon CI run, killed by the OOM killer). So no body throws:
+    // the first error that stops the run is kept and rethrown once every evaluation has returned
+    // (on a cancel, each returns at its next poll of the same request).
+    std::exception_ptr stop;
+    std::mutex stopMutex;
+    const auto keepStop = [&] {
+        const std::lock_guard<std::mutex> lock(stopMutex);
+        if (!stop) stop = std::current_exception();
+    };
     threads_->arena->execute([&] {
         tbb::parallel_for(0, count, 1, [&](int k) {
             const fs::path fieldsDir = batch.fieldsDirs.empty() ? fs::path() : batch.fieldsDirs[k];
@@ -120,15 +133,15 @@ BatchResult ThreadPool::evaluate(const Job& job, const Observations& observation
                 result.evaluations[k] = identify::evaluate(job, observation, batch.thetas[k], batch.resolution,
                                                            fieldsDir, batch.gridShift);
             } catch (const InputError&) {
-                throw;
+                keepStop();
             } catch (const Cancelled&) {
-                throw;  // every evaluation in flight stops too: each polls the same request
+                keepStop();
             } catch (const OutputError&) {
-                throw;  // a lost write stops the run: scored as a failed evaluation it would change the answer
+                keepStop();  // a lost write stops the run: scored as a failed evaluation it would change the answer
             } catch (const fs::filesystem_error&) {
-                throw;
+                keepStop();
             } catch (const openvdb::IoError&) {
-                throw;  // the evaluation's own fields could not be read back
+                keepStop();  // the evaluation's own fields could not be read back
             } catch (const std::exception& e) {
                 Evaluation& failed = result.evaluations[k];
                 failed.theta = batch.thetas[k];
@@ -138,6 +151,7 @@ BatchResult ThreadPool::evaluate(const Job& job, const Observations& observation
             }
         });
     });
+    if (stop) std::rethrow_exception(stop);
     return result;
 }
 
