@@ -494,9 +494,15 @@ TEST_F(IdentifyLoop, DiagnosisFindsAHiddenYieldStressAndNoEffectInANewtonianCont
         const auto started = std::chrono::steady_clock::now();
         const identify::Diagnosis diagnosis = identify::diagnose(job(doc), dir_ / (std::string(label) + "_diagnosis"), options);
         const json& d = diagnosis.document;
-        std::printf("[ diagnose ] %s (%.0f s): %s; base eta %.3f, held-out E %.4g, track error %.2f %% -> %.2f %%\n",
+        // The base flow's shear rate, where the material laws start.
+        ASSERT_TRUE(diagnosis.base.shearRate.has_value());
+        EXPECT_GT(*diagnosis.base.shearRate, 0.0);
+        EXPECT_EQ(d.at("base").at("shear_rate_per_s").get<double>(), *diagnosis.base.shearRate);
+        std::printf("[ diagnose ] %s (%.0f s): %s; base eta %.3f (shear rate %.3g 1/s), held-out E %.4g, track error "
+                    "%.2f %% -> %.2f %%\n",
                     label, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(),
-                    d.at("conclusion").get<std::string>().c_str(), diagnosis.base.theta[0], diagnosis.base.heldOutE,
+                    d.at("conclusion").get<std::string>().c_str(), diagnosis.base.theta[0], *diagnosis.base.shearRate,
+                    diagnosis.base.heldOutE,
                     100 * d.at("errors").at("track_error").at("before").get<double>(),
                     100 * d.at("errors").at("track_error").at("after").get<double>());
         for (const identify::ModelFit& fit : diagnosis.candidates) {

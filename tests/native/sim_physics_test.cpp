@@ -352,17 +352,22 @@ TEST(Physics, FirstLiquidOutOfTheHoleFallsAsWithShorterSteps) {
 namespace {
 const double kFilmDepth = 0.01, kFilmDrive = 1000 * 9.81 * std::sin(10 * M_PI / 180);  // ρ g sinθ
 
-double filmProfileError(const json& material, int resolution, const std::function<double(double)>& exact,
-                        const char* label) {
-    const double h = kFilmDepth, theta = 10 * M_PI / 180, g = 9.81;
+Scene filmScene(const json& material, int resolution) {
+    const double theta = 10 * M_PI / 180, g = 9.81;
     json doc = baseScene(1.0, resolution);
     doc["domain"] = {{"min", {0, 0, 0}}, {"max", {0.005, 0.005, 0.02}}, {"resolution", resolution},
                      {"periodic", {true, true, false}}};
-    doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {0.005, 0.005, h}}});
+    doc["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {0.005, 0.005, kFilmDepth}}});
     doc["material"] = material;
     doc["gravity"] = {g * std::sin(theta), 0, -g * std::cos(theta)};
     doc["fps"] = 10;
-    sim::Simulation s(parseScene(doc, "film"));
+    return parseScene(doc, "film");
+}
+
+double filmProfileError(const json& material, int resolution, const std::function<double(double)>& exact,
+                        const char* label) {
+    const double h = kFilmDepth;
+    sim::Simulation s(filmScene(material, resolution));
     for (int f = 0; f < 3; ++f) s.advanceFrame();
     double errorSq = 0, normSq = 0;
     const double dx = s.grid().dx;
@@ -390,6 +395,22 @@ TEST(Physics, NusseltFilmProfileConverges) {
         EXPECT_LT(error, previous);
         previous = error;
     }
+}
+
+// The frame's dissipation-weighted shear rate (FrameStats::shearRate), where diagnose starts its laws
+// of γ̇: in the Nusselt film γ̇ = G (1 − z/h), G = ρ g sinθ h / η, and the mean of ln γ̇ weighted by γ̇²
+// is ln G + 3 ∫₀¹ s² ln s ds = ln G − 1/3.
+TEST(Physics, NusseltFilmDissipatesAtItsWeightedShearRate) {
+    const double eta = 1.0, expected = kFilmDrive * kFilmDepth / eta * std::exp(-1.0 / 3);
+    sim::Simulation s(filmScene({{"density", 1000}, {"viscosity", eta}}, 32));
+    sim::FrameStats stats;
+    for (int f = 0; f < 3; ++f) stats = s.advanceFrame();
+    std::printf("film's dissipation-weighted shear rate %.3f 1/s, exact %.3f (%+.1f %%)\n", stats.shearRate, expected,
+                100 * (stats.shearRate / expected - 1));
+    EXPECT_NEAR(stats.shearRate, expected, 0.05 * expected);
+    // Σ W γ̇² Δx³ is the film's dissipation over η: ∫ γ̇² dV = G² h A / 3.
+    const double area = 0.005 * 0.005, G = kFilmDrive * kFilmDepth / eta;
+    EXPECT_NEAR(stats.dissipationWeight, G * G * kFilmDepth * area / 3, 0.1 * G * G * kFilmDepth * area / 3);
 }
 
 // Shear-thinning power law τ = K γ̇ⁿ (the Picard path): the shear stress is still ρ g sinθ (h − z),

@@ -26,7 +26,8 @@ namespace {
 // candidate which only moves within the fits' own scatter (grid, seed) is not taken for an effect.
 constexpr double kHeldOutGain = 0.2;
 // Warm starts: the base's searched parameters start at the base fit (log spread 0.5 around it),
-// an effect's new parameters at their declaration's start with a wide log spread.
+// an effect's new parameters at their declaration's start with a wide log spread; the power law its
+// consistency where it flows as the base fit at the base flow's shear rate, with the warm spread.
 constexpr double kWarmLogSpread = 0.5;
 constexpr double kNewLogSpread = 1.5;
 constexpr double kStartFlowIndex = 0.8;
@@ -93,35 +94,45 @@ std::string withEffect(Scene& scene, const std::string& effect, double eta) {
 }
 
 // The base's parameters and the effect's as a job's "parameters", or a reason the job cannot take it.
-std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect, json& out) {
+// `shearRate` is the base fit's flow's (ModelFit::shearRate), where the power law starts at η*.
+std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect,
+                             std::optional<double> shearRate, json& out) {
     out = json::array();
     const int eta = indexOf(job, "viscosity");
     const bool materialLaw = effect == "shear_thinning" || effect == "yield_stress";
     if (materialLaw && eta < 0) return "the job does not search the viscosity the law replaces";
     for (size_t i = 0; i < job.parameters.size(); ++i)
         if (!(materialLaw && int(i) == eta)) out.push_back(warmStart(job.parameters[i], theta[i]));
-    if (materialLaw) {
-        // K with a new parameter's spread: beside n or τ_y it means another thing. A Bingham
-        // liquid's apparent viscosity is K + τ_y/γ̇, so its K lies within [η*/100, η*], from η*/3:
-        // above η* lies a plateau of near-Newtonian fits (K ≈ η*, τ_y a few Pa) that the search
-        // stayed on (tests/bench/FINDINGS.md, "Diagnose on synthetic fronts").
-        const ParameterSpec& p = job.parameters[eta];
-        const bool bingham = effect == "yield_stress";
-        json consistency = searched("consistency", bingham ? theta[eta] / 3 : theta[eta], bingham ? 1.0 : kNewLogSpread);
-        consistency["min"] = bingham ? std::max(p.lower, theta[eta] / 100) : p.lower;
-        consistency["max"] = bingham ? theta[eta] : p.upper;
-        out.push_back(consistency);
-    }
     if (effect == "shear_thinning") {
+        // K = η* γ̇_c^(1−n₀) flows as the base where the base flow dissipates. From K = η* with a
+        // wide spread, the first samples were 2–5× thinner there, fitted badly and cost 2× the
+        // base's evaluations (FINDINGS, "One diagnosis of the sample cup"). Without γ̇_c (a thin
+        // film), from η*.
+        const ParameterSpec& p = job.parameters[eta];
+        const double k = theta[eta] * std::pow(shearRate.value_or(1.0), 1 - kStartFlowIndex);
+        json consistency = searched("consistency", std::clamp(k, p.lower, p.upper), shearRate ? kWarmLogSpread : kNewLogSpread);
+        consistency["min"] = p.lower;
+        consistency["max"] = p.upper;
+        out.push_back(consistency);
         // Thinning only (n ≤ 1), so that n = 1 is the base: a free n absorbed the difference of the
-        // reference's grid in a Newtonian control and predicted it better (FINDINGS, as above).
+        // reference's grid in a Newtonian control and predicted it better (tests/bench/FINDINGS.md,
+        // "Diagnose on synthetic fronts").
         json index = searched("flow_index", kStartFlowIndex, 0.3);
         index["max"] = 1.0;
         out.push_back(index);
     } else if (effect == "yield_stress") {
-        // Within [1 %, 100 %] of the liquid's hydrostatic stress ρ g h₀, from a tenth of it. Below,
-        // a yield stress hardly changes the flow and E is flat over many decades of ln τ_y, where
-        // the search drifted (FINDINGS, as above).
+        // A Bingham liquid's apparent viscosity is K + τ_y/γ̇, so its K lies within [η*/100, η*], from
+        // η*/3: above η* lies a plateau of near-Newtonian fits (K ≈ η*, τ_y a few Pa) that the search
+        // stayed on. Not from K + τ_y/γ̇_c = η*: the base flow's γ̇_c is not the rate of a flow with
+        // plugs, and that start fitted a hidden yield stress worse (FINDINGS, "Diagnose on synthetic
+        // fronts"). τ_y within [1 %, 100 %] of the liquid's hydrostatic stress ρ g h₀, from a tenth
+        // of it: below, a yield stress hardly changes the flow and E is flat over many decades of
+        // ln τ_y, where the search drifted (FINDINGS, as above).
+        const ParameterSpec& p = job.parameters[eta];
+        json consistency = searched("consistency", theta[eta] / 3, 1.0);
+        consistency["min"] = std::max(p.lower, theta[eta] / 100);
+        consistency["max"] = theta[eta];
+        out.push_back(consistency);
         const ParameterDeclaration& d = *findParameterDeclaration("yield_stress");
         json yieldStress = searched("yield_stress", d.searchInitial, kNewLogSpread);
         if (const double stress = hydrostaticStress(job.scene); stress > 0) {
@@ -204,7 +215,7 @@ std::vector<Job> runsOf(const Job& job) {
 struct RunScore {
     double fitted = 0, heldOut = 0, whole = 0;
     int fittedFrames = 0;
-    std::optional<double> trackError;
+    std::optional<double> trackError, shearRate;
     json series = json::array();
 };
 
@@ -243,6 +254,7 @@ RunScore scoreRun(const Job& run, const Observation& obs, const std::vector<doub
     score.whole = partE(run, obs, ev, frames);
     score.fittedFrames = fitCount;
     score.trackError = ev.trackError;
+    score.shearRate = ev.shearRate;
     for (size_t k = 0; k < frames.size(); ++k) {
         const size_t i = frames[k];
         json point{{"time_s", obs.reference.times[i]}, {"sim_frame", obs.simFrames[i]}, {"fitted", k < size_t(fitCount)}};
@@ -329,7 +341,10 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
         fit.heldOutE += score.heldOut;
         fit.wholeE += score.whole;
         fittedFrames += score.fittedFrames;
-        if (r == 0) fit.trackError = score.trackError;
+        if (r == 0) {
+            fit.trackError = score.trackError;
+            fit.shearRate = score.shearRate;
+        }
         runSeries.push_back(score.series);
     }
     fit.scoringSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - scoringStart).count();
@@ -348,6 +363,7 @@ json toJson(const ModelFit& fit, const json& series) {
              {"time_budget_s", fit.timeBudget},   {"material", fit.material},
              {"residual_over_time", series}};
     if (fit.trackError) doc["track_error"] = *fit.trackError;
+    if (fit.shearRate) doc["shear_rate_per_s"] = *fit.shearRate;
     if (fit.stop) doc["stopped"] = toString(*fit.stop);
     return doc;
 }
@@ -392,7 +408,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                            std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
         if (!asked) continue;
         json parameters;
-        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, parameters);
+        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, {}, parameters);
         if (why.empty()) {
             Scene probe = job.scene;
             why = withEffect(probe, effect.name, job.scene.material.viscosity);
@@ -419,7 +435,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     for (size_t c = 0; c < candidates.size(); ++c) {
         const std::string name = candidates[c]->name;
         json parameters;
-        effectParameters(job, diagnosis.base.theta, name, parameters);
+        effectParameters(job, diagnosis.base.theta, name, diagnosis.base.shearRate, parameters);
         if (options.onFit) {
             std::vector<std::string> names;
             for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());

@@ -361,12 +361,17 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
                                    [](const ParameterSpec& p) { return p.parameter.solid >= 0; }))
         searchedView = sceneVisibility(scene, job.camera);
     sim::LiquidLoss loss(simulation.liquidVolume());
+    double dissipationWeight = 0, weightedLogShearRate = 0;
     for (int frame = 0; frame <= lastFrame; ++frame) {
         const auto simStart = Clock::now();
         if (frame > 0) {
             const sim::FrameStats stats = simulation.advanceFrame();
             ev.unconvergedFrames += stats.converged ? 0 : 1;
             ev.liquidLost = std::max(ev.liquidLost, loss.observe(stats.liquidVolume));
+            if (stats.dissipationWeight > 0) {
+                dissipationWeight += stats.dissipationWeight;
+                weightedLogShearRate += stats.dissipationWeight * std::log(stats.shearRate);
+            }
         }
         auto lap = Clock::now();
         ev.simulationSeconds += seconds(simStart, lap);
@@ -428,6 +433,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
         ev.frameSeconds.push_back(seconds(simStart, frameEnd));
     }
     if (ev.fields && ev.fields->groundFrames > 0) ev.fields->meanGroundSpeed = groundSpeedSum / ev.fields->groundFrames;
+    if (dissipationWeight > 0) ev.shearRate = std::exp(weightedLogShearRate / dissipationWeight);
     if (obs.track) {
         std::vector<double> simulated;
         for (size_t i = 0; i < count; ++i)

@@ -87,6 +87,10 @@ struct Evaluation {
     // The measured track's simulated value at each reference frame (NaN where it is not compared), of
     // the first run: what diagnose reads the residual over time from.
     std::vector<double> trackSimulated;
+    // The shear rate the flow dissipates at over the simulated frames (FrameStats::shearRate, the
+    // frames weighted by their dissipation), of the first run's first placement; none for the
+    // thin-film model or a liquid at rest. Diagnose starts its laws of γ̇ there.
+    std::optional<double> shearRate;
     // With several runs, each run's E (their sum is E); frameE, the track error and the fields are
     // the first run's.
     std::vector<double> runE;

@@ -31,6 +31,7 @@ json toJson(const Evaluation& e) {
              {"fields_s", e.fieldsSeconds},
              {"frame_s", e.frameSeconds}};
     if (e.trackError) doc["track_error"] = *e.trackError;
+    if (e.shearRate) doc["shear_rate"] = *e.shearRate;
     if (!e.trackSimulated.empty()) {
         json& values = doc["track_simulated"] = json::array();
         for (double v : e.trackSimulated) values.push_back(std::isfinite(v) ? json(v) : json());
@@ -58,6 +59,7 @@ Evaluation evaluationFromJson(const json& doc) {
     e.fieldsSeconds = doc.at("fields_s").get<double>();
     e.frameSeconds = doc.at("frame_s").get<std::vector<double>>();
     if (doc.contains("track_error")) e.trackError = doc.at("track_error").get<double>();
+    if (doc.contains("shear_rate")) e.shearRate = doc.at("shear_rate").get<double>();
     if (doc.contains("track_simulated"))
         for (const json& v : doc.at("track_simulated")) e.trackSimulated.push_back(v.is_null() ? NAN : v.get<double>());
     if (doc.contains("run_E")) e.runE = doc.at("run_E").get<std::vector<double>>();

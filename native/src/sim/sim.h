@@ -89,6 +89,10 @@ struct FrameStats {
     double simulatedTime = 0;
     double liquidVolume = 0;  // m³, from the cell volume fractions
     double maxSpeed = 0;      // m/s over particles
+    // The shear rate the frame's flow dissipates at, at its end: exp of the mean of ln γ̇ over the
+    // liquid's cells weighted by W γ̇² (a Newtonian liquid's dissipation over η), and the weight's sum
+    // × Δx³ (m³/s²), to average frames with. Both 0 for a liquid at rest.
+    double shearRate = 0, dissipationWeight = 0;
     double transferSeconds = 0, solveSeconds = 0, otherSeconds = 0;
     bool converged = true;
 };
@@ -205,7 +209,11 @@ private:
     double interpolateVelocity(int axis, const Vec3& x, Vec3* gradient) const;
     void applyBodyForces(double dt);
     void applySurfaceTension(double dt);
+    // The Stokes solve's problem over this step's fractions and viscosities (its divergence target
+    // is the step's own).
+    StokesProblem stokesProblem(double dt) const;
     void updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity);
+    void measureShearRate(FrameStats& stats) const;
     void transferToParticles();
     void advectParticles(double dt);
 

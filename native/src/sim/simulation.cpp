@@ -836,6 +836,37 @@ void Simulation::applySurfaceTension(double dt) {
     }
 }
 
+StokesProblem Simulation::stokesProblem(double dt) const {
+    StokesProblem problem;
+    problem.grid = &grid_;
+    problem.weights = &fractions_;
+    problem.dt = dt;
+    problem.density = scene_.material.density;
+    problem.cellViscosity = &cellViscosity_;
+    problem.edgeViscosity = &edgeViscosity_;
+    problem.slipLength = scene_.material.slipLength;
+    problem.solidDistance = [this](const Vec3& x) { return solids_->distance(x); };
+    problem.tolerance = scene_.solver.tolerance;
+    problem.maxIterations = scene_.solver.maxIterations;
+    return problem;
+}
+
+// Where a law of γ̇ must match the flow to dissipate as a Newtonian one does: to first order in
+// ln γ̇, at the W γ̇²-weighted mean of ln γ̇. Diagnose starts its candidate laws there.
+void Simulation::measureShearRate(FrameStats& stats) const {
+    const ShearRates rates = shearRates(stokesProblem(0), state_.velocity);
+    double weight = 0, weightedLog = 0;
+    for (int c = 0; c < rates.cell.lattice.count(); ++c) {
+        const double rate = rates.cell[c], w = fractions_.cell[c] * rate * rate;
+        if (fractions_.cell[c] < kMinWeight || !(w > 0)) continue;
+        weight += w;
+        weightedLog += w * std::log(rate);
+    }
+    if (!(weight > 0)) return;
+    stats.shearRate = std::exp(weightedLog / weight);
+    stats.dissipationWeight = weight * std::pow(grid_.dx, 3);
+}
+
 // Per-sample viscosity: the material law at each stress sample's own shear rate (constant when
 // Newtonian); samples without liquid keep the scene's viscosity, which no stress row reads.
 void Simulation::updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity) {
@@ -992,21 +1023,11 @@ StepStats Simulation::step(double dt) {
     stats.otherSeconds += secondsSince(t0);
 
     t0 = Clock::now();
-    StokesProblem problem;
-    problem.grid = &grid_;
-    problem.weights = &fractions_;
-    problem.dt = dt;
-    problem.density = scene_.material.density;
-    problem.cellViscosity = &cellViscosity_;
-    problem.edgeViscosity = &edgeViscosity_;
-    problem.slipLength = scene_.material.slipLength;
+    StokesProblem problem = stokesProblem(dt);
     if (const double gridVolume = liquidVolume(); gridVolume > 0) {
         if (!volumeTarget_) volumeTarget_ = gridVolume;
         problem.divergence = (*volumeTarget_ - gridVolume) / (gridVolume * std::max(kVolumeRelaxationTime, 2 * dt));
     }
-    problem.solidDistance = [this](const Vec3& x) { return solids_->distance(x); };
-    problem.tolerance = scene_.solver.tolerance;
-    problem.maxIterations = scene_.solver.maxIterations;
     const int picard = material_->shearDependent() ? scene_.solver.picardIterations : 1;
     const std::array<Field, 3> uStar = state_.velocity;
     for (int it = 0; it < picard; ++it) {
@@ -1074,6 +1095,7 @@ FrameStats Simulation::advanceFrame() {
     stats.simulatedTime = time_;
     stats.liquidVolume = liquidVolume();
     for (const Vec3& v : particles_.velocity) stats.maxSpeed = std::max(stats.maxSpeed, v.norm());
+    measureShearRate(stats);
     return stats;
 }
 
