@@ -89,7 +89,7 @@ struct Evaluation {
     std::vector<double> trackSimulated;
     // The shear rate the flow dissipates at over the simulated frames (FrameStats::shearRate, the
     // frames weighted by their dissipation), of the first run's first placement; none for the
-    // thin-film model or a liquid at rest. Diagnose starts its laws of γ̇ there.
+    // thin-film model or a liquid at rest. Diagnose starts its power law there.
     std::optional<double> shearRate;
     // With several runs, each run's E (their sum is E); frameE, the track error and the fields are
     // the first run's.

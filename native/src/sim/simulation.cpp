@@ -852,7 +852,7 @@ StokesProblem Simulation::stokesProblem(double dt) const {
 }
 
 // Where a law of γ̇ must match the flow to dissipate as a Newtonian one does: to first order in
-// ln γ̇, at the W γ̇²-weighted mean of ln γ̇. Diagnose starts its candidate laws there.
+// ln γ̇, at the W γ̇²-weighted mean of ln γ̇. Diagnose starts its power law there.
 void Simulation::measureShearRate(FrameStats& stats) const {
     const ShearRates rates = shearRates(stokesProblem(0), state_.velocity);
     double weight = 0, weightedLog = 0;
