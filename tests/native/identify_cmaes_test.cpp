@@ -160,6 +160,31 @@ TEST(CmaEs, RestartKeepsCountersAndConvergesFromTheNewMean) {
     EXPECT_THROW(es.restart(Eigen::Vector2d(0, 0), Eigen::Vector2d(0.1, 0)), std::invalid_argument);
 }
 
+// A distribution along a ridge (the restart after a scan along a curve): σ² C is the covariance
+// asked for, and the samples follow it.
+TEST(CmaEs, RestartWithACovarianceSamplesAlongIt) {
+    Eigen::Matrix2d covariance;
+    covariance << 0.64, -0.4, -0.4, 0.36;  // spreads 0.8 and 0.6, correlation −0.83
+    CmaEs es(Eigen::Vector2d(2, -0.2), Eigen::Vector2d(0.5, 0.5), 5);
+    es.restartWithCovariance(Eigen::Vector2d(2, -0.2), covariance);
+    EXPECT_TRUE((es.sigma() * es.sigma() * es.covariance()).isApprox(covariance, 1e-12));
+    Eigen::Matrix2d sampled = Eigen::Matrix2d::Zero();
+    int count = 0;
+    for (int g = 0; g < 2000; ++g)
+        for (const Eigen::VectorXd& x : es.ask()) {
+            const Eigen::Vector2d d = x - es.mean();
+            sampled += d * d.transpose();
+            ++count;
+        }
+    sampled /= count;
+    EXPECT_NEAR(sampled(0, 0), 0.64, 0.03);
+    EXPECT_NEAR(sampled(1, 1), 0.36, 0.02);
+    EXPECT_NEAR(sampled(0, 1) / std::sqrt(sampled(0, 0) * sampled(1, 1)), -0.4 / (0.8 * 0.6), 0.02);
+    Eigen::Matrix2d notPositive;
+    notPositive << 0.64, 0.6, 0.6, 0.36;
+    EXPECT_THROW(es.restartWithCovariance(Eigen::Vector2d(0, 0), notPositive), std::invalid_argument);
+}
+
 // An injected point keeps its direction from the mean, at a Mahalanobis length of at most
 // √n + 2n/(n+2); one within that length is left as it is.
 TEST(CmaEs, InjectedPointsAreClippedToHansensLength) {

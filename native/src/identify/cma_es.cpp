@@ -2,6 +2,7 @@
 // default strategy parameters with positive log-weights (no active update), as pycma's purecma.
 #include "identify/identify.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
@@ -47,6 +48,15 @@ void CmaEs::restart(const Eigen::VectorXd& mean, const Eigen::VectorXd& spreads)
     C_ = (spreads / sigma_).array().square().matrix().asDiagonal();
     pSigma_ = Eigen::VectorXd::Zero(n_);
     pC_ = Eigen::VectorXd::Zero(n_);
+    updateEigenDecomposition();
+}
+
+void CmaEs::restartWithCovariance(const Eigen::VectorXd& mean, const Eigen::MatrixXd& covariance) {
+    if (covariance.rows() != n_ || covariance.cols() != n_ || !covariance.allFinite() ||
+        covariance.llt().info() != Eigen::Success)
+        throw std::invalid_argument("CmaEs: the covariance must be finite, positive definite and of the dimension");
+    restart(mean, covariance.diagonal().cwiseSqrt().eval());
+    C_ = covariance / (sigma_ * sigma_);
     updateEigenDecomposition();
 }
 

@@ -30,6 +30,8 @@ public:
     // Starts the search again at `mean` with per-coordinate spreads (σ and C as in the constructor,
     // evolution paths zero), keeping the generation and evaluation counters and the random stream.
     void restart(const Eigen::VectorXd& mean, const Eigen::VectorXd& spreads);
+    // The same with a full covariance of the distribution (σ² C, σ the largest standard deviation).
+    void restartWithCovariance(const Eigen::VectorXd& mean, const Eigen::MatrixXd& covariance);
     // An outside point made fit to replace one of ask()'s candidates (Hansen 2011, "Injecting
     // external solutions into CMA-ES", eq. 4): its step from the mean is shortened to a Mahalanobis
     // length of at most √n + 2n/(n+2), so one far point cannot drag the mean or inflate σ.

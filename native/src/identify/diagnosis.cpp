@@ -31,6 +31,9 @@ constexpr double kHeldOutGain = 0.2;
 constexpr double kWarmLogSpread = 0.5;
 constexpr double kNewLogSpread = 1.5;
 constexpr double kStartFlowIndex = 0.8;
+// The power law's first generation scans n from 1 down to this along K γ̇_c^(n−1) = η*: thinner
+// than most food and cosmetic liquids (xanthan solutions, ketchup: n ≈ 0.2–0.4).
+constexpr double kLeastScannedFlowIndex = 0.25;
 
 const std::vector<Effect> kEffects = {
     {"shear_thinning", "power law η = K γ̇^(n−1), n ≤ 1, in place of η: K and n searched",
@@ -166,6 +169,29 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         out.push_back(width);
     }
     return "";
+}
+
+// The power law's curve of (K, n) that flow as the base fit at the base flow's shear rate γ̇_c, K =
+// η* γ̇_c^(1−n), from n = 1 (the base's own flow) at s = 0 down to kLeastScannedFlowIndex at s = 1; the
+// other parameters at their starts (the base fit). The search's first generation scans it: from
+// independent samples of K and n, two generations landed off this narrow valley (FINDINGS, "One
+// diagnosis of the sample cup").
+std::function<std::vector<double>(double)> powerLawRidge(const Job& job, const json& parameters, double eta,
+                                                         double shearRate) {
+    std::vector<double> start;
+    int consistency = -1, index = -1;
+    for (size_t i = 0; i < parameters.size(); ++i) {
+        start.push_back(parameters[i].at("initial").get<double>());
+        if (parameters[i].at("name") == "consistency") consistency = static_cast<int>(i);
+        if (parameters[i].at("name") == "flow_index") index = static_cast<int>(i);
+    }
+    const ParameterSpec& k = job.parameters[indexOf(job, "viscosity")];
+    return [=](double s) {
+        std::vector<double> theta = start;
+        theta[index] = 1 - s * (1 - kLeastScannedFlowIndex);
+        theta[consistency] = std::clamp(eta * std::pow(shearRate, 1 - theta[index]), k.lower, k.upper);
+        return theta;
+    };
 }
 
 // The job of a model: the base job with the effect's scene and parameters in every run, limited to
@@ -308,11 +334,11 @@ class FitBudget {
     int fitsLeft_;
 };
 
-// Fits a model to the fitted frames (scoring `knownPoint` too, if given) within `searchBudget` wall
-// seconds (0: the job's), then scores θ* on every frame of every run.
+// Fits a model to the fitted frames (with `identifyOptions`' known point and start curve, if given)
+// within `searchBudget` wall seconds (0: the job's), then scores θ* on every frame of every run.
 ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const std::vector<Observation>& observations,
-                  const std::vector<int>& fitCounts, const fs::path& dir, const DiagnoseOptions& options,
-                  const std::vector<double>& knownPoint, double searchBudget, json& runSeries) {
+                  const std::vector<int>& fitCounts, const fs::path& dir, IdentifyOptions identifyOptions,
+                  double searchBudget, json& runSeries) {
     ModelFit fit;
     fit.model = model;
     for (const ParameterSpec& p : full.parameters) fit.parameters.push_back(p.name());
@@ -320,9 +346,7 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
     fit.timeBudget = fitting.timeBudget;
     // A base with every unknown fixed has nothing to fit: it is scored where it is held.
     if (!fitting.parameters.empty()) {
-        IdentifyOptions identifyOptions = options.identify;
         identifyOptions.writeFields = false;
-        identifyOptions.knownPoint = knownPoint;
         const IdentificationResult result = identify(fitting, dir, identifyOptions);
         fit.theta = result.theta;
         fit.interval = result.interval;
@@ -428,7 +452,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     }
     FitBudget budget(options.timeBudget, fits);
     diagnosis.base = fitModel("base", job, modelJob(job, "", {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
-                              options, {}, budget.nextSearch(), baseSeries);
+                              options.identify, budget.nextSearch(), baseSeries);
     budget.spend(diagnosis.base);
     json candidatesDoc = json::array();
     std::vector<json> candidateSeries;
@@ -451,10 +475,17 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
             for (size_t i = 0; i < run->parameters.size(); ++i)
                 setParameter(run->scene, run->parameters[i].parameter, diagnosis.base.theta[i]);
         const Job full = modelJob(base, name, parameters, {});
+        // The power law scans its ridge from the base's own flow; the other candidates score that
+        // point beside their first generation.
+        IdentifyOptions identifyOptions = options.identify;
+        if (name == "shear_thinning" && diagnosis.base.shearRate)
+            identifyOptions.startCurve = powerLawRidge(job, parameters, diagnosis.base.theta[indexOf(job, "viscosity")],
+                                                       *diagnosis.base.shearRate);
+        else
+            identifyOptions.knownPoint = baseEquivalent(full, job, diagnosis.base.theta);
         json series;
         diagnosis.candidates.push_back(fitModel(name, full, modelJob(base, name, parameters, fitCounts), observations,
-                                                fitCounts, outDir / "fits" / name, options,
-                                                baseEquivalent(full, job, diagnosis.base.theta), budget.nextSearch(),
+                                                fitCounts, outDir / "fits" / name, identifyOptions, budget.nextSearch(),
                                                 series));
         budget.spend(diagnosis.candidates.back());
         candidateSeries.push_back(series);

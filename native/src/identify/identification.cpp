@@ -30,7 +30,8 @@
 //     the best of them with half their spacing as spread. Sampled, the four points of one draw can
 //     all miss a far optimum, and σ grows too slowly to make up for it within a budget: from the
 //     table's common start (17.3 Pa·s, spread ln 4) the 300 Pa·s reference's search was still
-//     climbing at 111 when its 600 s ran out;
+//     climbing at 111 when its 600 s ran out. A caller's start curve is scanned the same way, in any
+//     dimension, with the restart's spread along the curve (restartAlongScan);
 //   * in one dimension each later full-fidelity generation scores, in place of a sample, the
 //     vertex of the parabola through the best full-fidelity evaluation and its neighbours (see
 //     parabolicProposal), clipped as an injected solution;
@@ -136,14 +137,42 @@ std::string noSimulatedLiquidSeen(const Job& job, const Observation& obs, const 
     return text.str();
 }
 
-// The first coarse generation's points in one dimension: `count` evenly over ±2σ₀ around the start,
-// clipped to the bounds (see the fidelity policy).
-std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count) {
+// The first generation's points when it scans (see the fidelity policy), in log space: `count` evenly
+// along the caller's curve, or in one dimension evenly over ±2σ₀ around the start, within the bounds.
+std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count,
+                                        const std::function<std::vector<double>(double)>& curve) {
     const double lo = std::max(space.lower[0], space.start[0] - 2 * space.spread[0]);
     const double hi = std::min(space.upper[0], space.start[0] + 2 * space.spread[0]);
     std::vector<Eigen::VectorXd> points;
-    for (int k = 0; k < count; ++k) points.push_back(Eigen::VectorXd::Constant(1, lo + (hi - lo) * k / (count - 1)));
+    for (int k = 0; k < count; ++k) {
+        const double s = double(k) / (count - 1);
+        if (!curve) {
+            points.push_back(Eigen::VectorXd::Constant(1, lo + (hi - lo) * s));
+            continue;
+        }
+        const std::vector<double> theta = curve(s);
+        if (theta.size() != size_t(space.start.size()))
+            throw std::logic_error("identify: the start curve has " + std::to_string(theta.size()) +
+                                   " parameters, the job searches " + std::to_string(space.start.size()));
+        points.push_back(Eigen::Map<const Eigen::VectorXd>(theta.data(), space.start.size()).array().log().matrix());
+    }
     return points;
+}
+
+// Where CMA-ES starts again after a scan (points in the curve's order): at the best point, its
+// standard deviation along the chord through the best point's neighbours a quarter of that chord
+// (half a step of an even scan), across it kAcrossScan of that. A diagonal spread as wide across
+// as along put most samples off the curve, where E is high (FINDINGS, "One diagnosis of the sample
+// cup").
+constexpr double kAcrossScan = 0.5;
+void restartAlongScan(CmaEs& es, const std::vector<Eigen::VectorXd>& xs, int best) {
+    const int last = static_cast<int>(xs.size()) - 1, n = es.dimension();
+    const Eigen::VectorXd chord = xs[std::min(best + 1, last)] - xs[std::max(best - 1, 0)];
+    const double along = std::max(chord.norm() / (best == 0 || best == last ? 2 : 4), 1e-6);
+    const Eigen::VectorXd u = chord.norm() > 0 ? Eigen::VectorXd(chord.normalized()) : Eigen::VectorXd::Unit(n, 0);
+    const Eigen::MatrixXd alongOnly = u * u.transpose();
+    const Eigen::MatrixXd across = Eigen::MatrixXd::Identity(n, n) - alongOnly;
+    es.restartWithCovariance(xs[best], along * along * (alongOnly + kAcrossScan * kAcrossScan * across));
 }
 
 }  // namespace
@@ -242,8 +271,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const bool coarse = fidelity == Fidelity::Coarse;
         const auto genStart = Clock::now();
         std::vector<Eigen::VectorXd> xs = es.ask();
-        const bool scan = g == 0 && coarse && n == 1 && xs.size() > 1;
-        if (scan) xs = scanPoints(bounds, static_cast<int>(xs.size()));
+        const bool scan = g == 0 && xs.size() > 1 && (options.startCurve || (coarse && n == 1));
+        if (scan) xs = scanPoints(bounds, static_cast<int>(xs.size()), options.startCurve);
         // Where each point came from, recorded with its evaluation: a CMA-ES sample, a scan point,
         // or an injected restart point or parabolic proposal.
         std::vector<std::string> origins(xs.size(), scan ? "scan" : "sample");
@@ -311,7 +340,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             fields.clearStaging();
         }
         es.tell({xs.begin(), xs.begin() + sampled}, {fitness.begin(), fitness.begin() + sampled});
-        if (scan) es.restart(xs[bestK], Eigen::VectorXd::Constant(1, std::max(0.5 * (xs[1][0] - xs[0][0]), 1e-6)));
+        if (scan) restartAlongScan(es, xs, bestK);
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         budget.addGeneration(fidelity, genSeconds);
         const std::optional<BestPoint> best = bestAt(job, state.evaluated, fidelity);

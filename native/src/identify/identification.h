@@ -56,6 +56,10 @@ struct IdentifyOptions {
     // θ scored beside the first full-fidelity generation's samples (not told to CMA-ES), so that
     // the search ends no worse than it: a diagnosis's candidate at its base-equivalent point.
     std::vector<double> knownPoint;
+    // A curve θ(s), s ∈ [0, 1], near which the caller expects the minimum (a diagnosis's power law:
+    // the (K, n) that flow as the base fit). When set, the first generation scans it in place of
+    // CMA-ES's samples, as a one-parameter search scans its start (identification.cpp).
+    std::function<std::vector<double>(double)> startCurve;
 };
 
 // Runs (or resumes from OUT/checkpoint.json) the identification and writes OUT/result.json,
