@@ -4,7 +4,7 @@
 against the build before it; the runs alternate so that the machine's drift hits both alike.
 
     engine_ab.py --before OLD/viscoscope --after build/bin/viscoscope [--scene sample_scenes/capture_cup.json]
-                 [--eta 300] [--resolution 48] [--frames 40] [--repeats 3]
+                 [--eta 300] [--model '{"type": "power_law", ...}'] [--resolution 48] [--frames 40] [--repeats 3]
 """
 import argparse
 import json
@@ -24,6 +24,7 @@ def main() -> int:
     parser.add_argument("--after", default=str(ROOT / "build/bin/viscoscope"))
     parser.add_argument("--scene", default=str(ROOT / "sample_scenes/capture_cup.json"))
     parser.add_argument("--eta", type=float, default=None, help="viscosity, Pa·s (default: the scene's)")
+    parser.add_argument("--model", help="the liquid's material.model (JSON), e.g. a power law")
     parser.add_argument("--resolution", type=int, default=None)
     parser.add_argument("--frames", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=3)
@@ -35,6 +36,8 @@ def main() -> int:
     scene = json.loads(pathlib.Path(args.scene).read_text())
     if args.eta is not None:
         scene["material"]["viscosity"] = args.eta
+    if args.model is not None:
+        scene["material"]["model"] = json.loads(args.model)
     if args.resolution is not None:
         scene["domain"]["resolution"] = args.resolution
     scene["frames"] = args.frames
@@ -54,7 +57,8 @@ def main() -> int:
                 seconds[name].append(time.monotonic() - start)
                 print(f"repeat {repeat + 1} {name:6s} {seconds[name][-1]:7.2f} s", flush=True)
     before, after = statistics.median(seconds["before"]), statistics.median(seconds["after"])
-    print(f"{pathlib.Path(args.scene).name} η {scene['material']['viscosity']} Pa·s, "
+    print(f"{pathlib.Path(args.scene).name} η {scene['material']['viscosity']} Pa·s"
+          f"{', model ' + args.model if args.model else ''}, "
           f"{scene['domain']['resolution']}³, {args.frames} frames: median before {before:.2f} s, "
           f"after {after:.2f} s, after/before {after / before:.3f}")
     return 0

@@ -426,6 +426,31 @@ TEST(Physics, PowerLawFilmMatchesItsProfile) {
     EXPECT_LT(error, 0.05);
 }
 
+// A power law of index 1 is the Newtonian liquid of η = K: its Picard iterates leave η as it was, so
+// each step solves once (kPicardTolerance), not picard_iterations times, and flows as the Newtonian.
+TEST(Physics, PowerLawOfIndexOneFlowsAsNewtonianInOneSolveAStep) {
+    json newtonian = baseScene(4.0, 24);
+    newtonian["solids"] = {{{"type", "ground"}, {"height", 0.0}}};
+    newtonian["liquids"].push_back({{"type", "box"}, {"min", {0, 0, 0}}, {"max", {0.015, 0.04, 0.02}}});
+    json powerLaw = newtonian;
+    powerLaw["material"]["model"] = {{"type", "power_law"}, {"consistency", 4.0}, {"flow_index", 1.0}};
+    sim::Simulation a(parseScene(newtonian, "newtonian")), b(parseScene(powerLaw, "power law n = 1"));
+    long iterationsA = 0, iterationsB = 0, steps = 0;
+    for (int f = 0; f < 6; ++f) {
+        const sim::FrameStats frame = a.advanceFrame();
+        iterationsA += frame.solverIterations;
+        steps += frame.steps;
+        iterationsB += b.advanceFrame().solverIterations;
+    }
+    double apart = 0;
+    for (size_t p = 0; p < a.particles().position.size(); ++p)
+        apart = std::max(apart, (a.particles().position[p] - b.particles().position[p]).norm());
+    std::printf("power law n = 1 against Newtonian, %ld steps: solver iterations %ld against %ld, particles at most "
+                "%.3g m apart\n", steps, iterationsB, iterationsA, apart);
+    EXPECT_EQ(iterationsB, iterationsA);
+    EXPECT_LT(apart, 1e-9);
+}
+
 // Carreau η = η∞ + (η0 − η∞)(1 + (λγ̇)²)^{(n−1)/2} (Carreau 1972): η0 = 5 Pa·s thins from η0 at the top
 // (γ̇ → 0) to a quarter of it at the bed (λγ̇ ≈ 10 there). The stress profile is the power law's,
 // ρ g sinθ (h − z); γ̇ at each height solves η(γ̇) γ̇ = τ (monotone in γ̇), found by bisection, and

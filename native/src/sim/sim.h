@@ -212,7 +212,9 @@ private:
     // The Stokes solve's problem over this step's fractions and viscosities (its divergence target
     // is the step's own).
     StokesProblem stokesProblem(double dt) const;
-    void updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity);
+    // Sets η at every cell and edge from `velocity`'s shear rates; returns the RMS change of η over
+    // the liquid's samples relative to its RMS (0 for a Newtonian liquid).
+    double updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity);
     void measureShearRate(FrameStats& stats) const;
     void transferToParticles();
     void advectParticles(double dt);
