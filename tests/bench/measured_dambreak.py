@@ -27,7 +27,7 @@ with `--unknown both` the front alone identifies the two at once.
 
     /usr/bin/python3 tests/bench/measured_dambreak.py [--resolution 100] [--channel-width 0.1] [--work DIR]
     /usr/bin/python3 tests/bench/measured_dambreak.py --unknown channel_width [--max-width 0.3]
-    /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose [--resolution 60] [--generations 6]
+    /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose [--resolution 60] [--generations 6] [--effects a,b]
     /usr/bin/python3 tests/bench/measured_dambreak.py --diagnose --experiment particles
 
 `--fix-viscosity` holds η at the viscometer's (10.10 ± 0.22 Pa·s, the job's `fixed`, nothing
@@ -92,6 +92,7 @@ def main():
     parser.add_argument("--unknown", choices=("viscosity", "channel_width", "both"), default="viscosity")
     parser.add_argument("--max-width", type=float, default=0.3, help="m: the widest channel searched")
     parser.add_argument("--diagnose", action="store_true", help="run viscoscope diagnose on the front")
+    parser.add_argument("--effects", help="with --diagnose: the candidates, comma-separated (default: every one)")
     parser.add_argument("--fix-viscosity", action="store_true",
                         help="with --diagnose: η held at the viscometer's, each effect fitting its own parameters alone")
     args = parser.parse_args()
@@ -170,7 +171,7 @@ def diagnose(args):
     if args.fix_viscosity:
         job["fixed"] = [{"name": "viscosity", "value": sum(VISCOMETER) / 2, "uncertainty": (VISCOMETER[1] - VISCOMETER[0]) / 2}]
     (work / "job.json").write_text(json.dumps(job, indent=1))
-    wall = run_engine(args, "diagnose", work, "diagnose")
+    wall = run_engine(args, "diagnose", work, "diagnose", *(["--effects", args.effects] if args.effects else []))
     d = json.loads((work / "diagnose/diagnosis.json").read_text())
     print(f"dam break, {args.resolution} cells along the channel, {args.generations} generations per fit, "
           f"fitted frames {d['fitted_frames']}, {wall:.0f} s: {d['conclusion']}")

@@ -174,8 +174,8 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
 // The power law's curve of (K, n) that flow as the base fit at the base flow's shear rate γ̇_c, K =
 // η* γ̇_c^(1−n), from n = 1 (the base's own flow) at s = 0 down to kLeastScannedFlowIndex at s = 1; the
 // other parameters at their starts (the base fit). The search's first generation scans it: from
-// independent samples of K and n, two generations landed off this narrow valley (FINDINGS, "One
-// diagnosis of the sample cup").
+// independent samples of K and n, the synthetic fronts' hidden power law was missed (FINDINGS,
+// "Diagnose on synthetic fronts", 11).
 std::function<std::vector<double>(double)> powerLawRidge(const Job& job, const json& parameters, double eta,
                                                          double shearRate) {
     std::vector<double> start;
