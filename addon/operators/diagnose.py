@@ -38,6 +38,8 @@ def describe_model(entry):
         line += ", track error %.2f %%" % (100 * entry["track_error"])
     if "earns_its_parameters" in entry:
         line += "; earns its parameters" if entry["earns_its_parameters"] else "; does not earn its parameters"
+    if entry.get("effect_vanishes"):
+        line += " (it ended where its effect vanishes: the base model)"
     return line
 
 

@@ -25,9 +25,15 @@ namespace {
 // The held-out improvement a candidate must make: a fifth of the base's held-out E, so that a
 // candidate which only moves within the fits' own scatter (grid, seed) is not taken for an effect.
 constexpr double kHeldOutGain = 0.2;
+// A fit whose added parameters all end within this log distance of their base-equivalent values (n
+// = 1, τ_y or the slip at its least, the channel at its widest) is the base model: when it predicts
+// better, the base fit was not converged, which is not an effect (on the measured particle-laden dam
+// break the power law ended at n = 1 with a better η than the base's: FINDINGS, "Diagnose on the
+// measured particle-laden syrup dam break").
+constexpr double kVanishedLogDistance = 0.01;
 // Warm starts: the base's searched parameters start at the base fit (log spread 0.5 around it),
 // an effect's new parameters at their declaration's start with a wide log spread; the power law its
-// consistency where it flows as the base fit at the base flow's shear rate, with the warm spread.
+// consistency at η* (its first generation scans powerLawRidge instead where it can).
 constexpr double kWarmLogSpread = 0.5;
 constexpr double kNewLogSpread = 1.5;
 constexpr double kStartFlowIndex = 0.8;
@@ -97,9 +103,7 @@ std::string withEffect(Scene& scene, const std::string& effect, double eta) {
 }
 
 // The base's parameters and the effect's as a job's "parameters", or a reason the job cannot take it.
-// `shearRate` is the base fit's flow's (ModelFit::shearRate), where the power law starts at η*.
-std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect,
-                             std::optional<double> shearRate, json& out) {
+std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect, json& out) {
     out = json::array();
     const int eta = indexOf(job, "viscosity");
     const bool materialLaw = effect == "shear_thinning" || effect == "yield_stress";
@@ -107,13 +111,10 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
     for (size_t i = 0; i < job.parameters.size(); ++i)
         if (!(materialLaw && int(i) == eta)) out.push_back(warmStart(job.parameters[i], theta[i]));
     if (effect == "shear_thinning") {
-        // K = η* γ̇_c^(1−n₀) flows as the base where the base flow dissipates. From K = η* with a
-        // wide spread, the first samples were 2–5× thinner there, fitted badly and cost 2× the
-        // base's evaluations (FINDINGS, "One diagnosis of the sample cup"). Without γ̇_c (a thin
-        // film), from η*.
+        // From K = η* with a wide spread: where the base flow's shear rate is known (not on a thin
+        // film), the first generation scans powerLawRidge instead of sampling around this.
         const ParameterSpec& p = job.parameters[eta];
-        const double k = theta[eta] * std::pow(shearRate.value_or(1.0), 1 - kStartFlowIndex);
-        json consistency = searched("consistency", std::clamp(k, p.lower, p.upper), shearRate ? kWarmLogSpread : kNewLogSpread);
+        json consistency = searched("consistency", theta[eta], kNewLogSpread);
         consistency["min"] = p.lower;
         consistency["max"] = p.upper;
         out.push_back(consistency);
@@ -228,6 +229,16 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
         run.fidelity.coarseGenerations = 0;
     }
     return job;
+}
+
+// Whether `fit` ended where its effect vanishes: each parameter the effect adds (not the base's, nor
+// the K that takes η's place) within kVanishedLogDistance of its value in `equivalent`.
+bool effectVanishes(const ModelFit& fit, const Job& base, const std::vector<double>& equivalent) {
+    for (size_t i = 0; i < fit.parameters.size(); ++i)
+        if (indexOf(base, fit.parameters[i]) < 0 && fit.parameters[i] != "consistency" &&
+            std::abs(std::log(fit.theta[i] / equivalent[i])) > kVanishedLogDistance)
+            return false;
+    return true;
 }
 
 // Each run of `job` as a job of its own.
@@ -432,7 +443,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                            std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
         if (!asked) continue;
         json parameters;
-        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, {}, parameters);
+        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, parameters);
         if (why.empty()) {
             Scene probe = job.scene;
             why = withEffect(probe, effect.name, job.scene.material.viscosity);
@@ -456,10 +467,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     budget.spend(diagnosis.base);
     json candidatesDoc = json::array();
     std::vector<json> candidateSeries;
+    std::vector<std::vector<double>> equivalents;  // each candidate's base-equivalent point
     for (size_t c = 0; c < candidates.size(); ++c) {
         const std::string name = candidates[c]->name;
         json parameters;
-        effectParameters(job, diagnosis.base.theta, name, diagnosis.base.shearRate, parameters);
+        effectParameters(job, diagnosis.base.theta, name, parameters);
         if (options.onFit) {
             std::vector<std::string> names;
             for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());
@@ -477,12 +489,13 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         const Job full = modelJob(base, name, parameters, {});
         // The power law scans its ridge from the base's own flow; the other candidates score that
         // point beside their first generation.
+        equivalents.push_back(baseEquivalent(full, job, diagnosis.base.theta));
         IdentifyOptions identifyOptions = options.identify;
         if (name == "shear_thinning" && diagnosis.base.shearRate)
             identifyOptions.startCurve = powerLawRidge(job, parameters, diagnosis.base.theta[indexOf(job, "viscosity")],
                                                        *diagnosis.base.shearRate);
         else
-            identifyOptions.knownPoint = baseEquivalent(full, job, diagnosis.base.theta);
+            identifyOptions.knownPoint = equivalents.back();
         json series;
         diagnosis.candidates.push_back(fitModel(name, full, modelJob(base, name, parameters, fitCounts), observations,
                                                 fitCounts, outDir / "fits" / name, identifyOptions, budget.nextSearch(),
@@ -492,28 +505,37 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     }
 
     const ModelFit& base = diagnosis.base;
+    json warnings = json::array();
+    const auto warn = [&](const std::string& line) {
+        warnings.push_back(line);
+        if (options.identify.onWarning) options.identify.onWarning(line);
+    };
     for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
         const ModelFit& fit = diagnosis.candidates[c];
-        const bool earns = fit.heldOutE < (1 - kHeldOutGain) * base.heldOutE && fit.bic < base.bic;
+        const bool better = fit.heldOutE < (1 - kHeldOutGain) * base.heldOutE && fit.bic < base.bic;
+        const bool vanishes = effectVanishes(fit, job, equivalents[c]);
+        const bool earns = better && !vanishes;
+        if (better && vanishes)
+            warn("diagnose: " + fit.model + " ended where its effect vanishes, as the base model, yet predicts the "
+                 "held-out frames " + std::to_string(int(std::lround(100 * (1 - fit.heldOutE / base.heldOutE)))) +
+                 " % better than the base fit: the base fit is not converged (more generations or time, or fewer "
+                 "--effects to share them)");
         if (earns && (!diagnosis.chosen || fit.heldOutE < diagnosis.candidates[*diagnosis.chosen].heldOutE))
             diagnosis.chosen = c;
         json entry = toJson(fit, candidateSeries[c]);
         entry["description"] = candidates[c]->description;
         entry["source"] = candidates[c]->source;
         entry["held_out_gain"] = base.heldOutE > 0 ? 1 - fit.heldOutE / base.heldOutE : 0.0;
+        entry["effect_vanishes"] = vanishes;
         entry["earns_its_parameters"] = earns;
         candidatesDoc.push_back(entry);
     }
     // Each search makes its minimum generations whatever its share, so a diagnosis can end late: say
     // so, with what would take less.
-    json warnings = json::array();
-    if (options.timeBudget > 0 && budget.spent() > options.timeBudget) {
-        warnings.push_back("diagnose: the fits took " + wholeSeconds(budget.spent()) + " s of a " +
-                           wholeSeconds(options.timeBudget) + " s budget: each search makes at least " +
-                           std::to_string(job.fidelity.minFineGenerations) +
-                           " generations (a coarser grid, a shorter clip or fewer --effects take less)");
-        if (options.identify.onWarning) options.identify.onWarning(warnings.back());
-    }
+    if (options.timeBudget > 0 && budget.spent() > options.timeBudget)
+        warn("diagnose: the fits took " + wholeSeconds(budget.spent()) + " s of a " + wholeSeconds(options.timeBudget) +
+             " s budget: each search makes at least " + std::to_string(job.fidelity.minFineGenerations) +
+             " generations (a coarser grid, a shorter clip or fewer --effects take less)");
     json notTried = json::array();
     for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
     const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
