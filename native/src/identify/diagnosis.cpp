@@ -177,8 +177,7 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
 // other parameters at their starts (the base fit). The search's first generation scans it: from
 // independent samples of K and n, the synthetic fronts' hidden power law was missed (FINDINGS,
 // "Diagnose on synthetic fronts", 11).
-std::function<std::vector<double>(double)> powerLawRidge(const Job& job, const json& parameters, double eta,
-                                                         double shearRate) {
+std::function<std::vector<double>(double)> powerLawRidge(const json& parameters, double eta, double shearRate) {
     std::vector<double> start;
     int consistency = -1, index = -1;
     for (size_t i = 0; i < parameters.size(); ++i) {
@@ -186,11 +185,12 @@ std::function<std::vector<double>(double)> powerLawRidge(const Job& job, const j
         if (parameters[i].at("name") == "consistency") consistency = static_cast<int>(i);
         if (parameters[i].at("name") == "flow_index") index = static_cast<int>(i);
     }
-    const ParameterSpec& k = job.parameters[indexOf(job, "viscosity")];
+    const double lower = parameters[consistency].at("min").get<double>();
+    const double upper = parameters[consistency].at("max").get<double>();
     return [=](double s) {
         std::vector<double> theta = start;
         theta[index] = 1 - s * (1 - kLeastScannedFlowIndex);
-        theta[consistency] = std::clamp(eta * std::pow(shearRate, 1 - theta[index]), k.lower, k.upper);
+        theta[consistency] = std::clamp(eta * std::pow(shearRate, 1 - theta[index]), lower, upper);
         return theta;
     };
 }
@@ -307,9 +307,9 @@ RunScore scoreRun(const Job& run, const Observation& obs, const std::vector<doub
 
 // A candidate's parameters where its effect vanishes, the base fit's values for the rest: n = 1 and
 // K = η*, a yield stress and a slip length at their lower bounds, a channel at its widest. Scored
-// beside the fit's first generation, so that no candidate ends worse than the base in sample: from
+// with the fit's first generation, so that no candidate ends worse than the base in sample: from
 // their own starts, the measured syrup dam break's material laws did (FINDINGS, "Diagnose on the
-// measured syrup dam break").
+// measured syrup dam break"); and where a fit ends here, it is the base model (effectVanishes).
 std::vector<double> baseEquivalent(const Job& model, const Job& base, const std::vector<double>& baseTheta) {
     std::vector<double> theta;
     for (const ParameterSpec& p : model.parameters) {
@@ -487,13 +487,13 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
             for (size_t i = 0; i < run->parameters.size(); ++i)
                 setParameter(run->scene, run->parameters[i].parameter, diagnosis.base.theta[i]);
         const Job full = modelJob(base, name, parameters, {});
-        // The power law scans its ridge from the base's own flow; the other candidates score that
-        // point beside their first generation.
         equivalents.push_back(baseEquivalent(full, job, diagnosis.base.theta));
+        // The power law scans its ridge from the base's own flow (its n = 1 point is the base
+        // equivalent); the other candidates score that point beside their first generation.
         IdentifyOptions identifyOptions = options.identify;
         if (name == "shear_thinning" && diagnosis.base.shearRate)
-            identifyOptions.startCurve = powerLawRidge(job, parameters, diagnosis.base.theta[indexOf(job, "viscosity")],
-                                                       *diagnosis.base.shearRate);
+            identifyOptions.startCurve =
+                powerLawRidge(parameters, diagnosis.base.theta[indexOf(job, "viscosity")], *diagnosis.base.shearRate);
         else
             identifyOptions.knownPoint = equivalents.back();
         json series;
