@@ -52,7 +52,7 @@ def main(out_dir):
     runs = len(base["residual_over_time"])
     shown = chosen or base
     new = [n for n in shown["parameters"] if chosen is None or n not in base["parameters"]]
-    path = os.path.join(out_dir, "fits", "base" if chosen is None else chosen["model"], "evaluations.csv")
+    path = os.path.join(out_dir, shown["folder"], "evaluations.csv")
     evaluations = []
     if new and os.path.isfile(path):
         with open(path, encoding="utf-8", newline="") as fh:

@@ -67,6 +67,11 @@ def read_diagnosis(context, out_dir):
         raise ValueError("%s chose %r, which is not among its candidates" % (path, chosen))
     lines = ["Warning: %s" % w for w in doc.get("warnings", ())]
     lines += [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
+    refit = doc.get("base_refit")
+    if refit:
+        lines.append("The base refit from where %s's fit puts it %s; the other base fit: %s"
+                     % (refit["from"], "replaced the first fit" if refit["replaced_first_fit"] else "did not better the first fit",
+                        describe_model(refit["unused_fit"])))
     lines += ["%s not tried: %s" % (n["effect"], n["why"]) for n in doc.get("not_tried", ())]
     geometry = [name for name in after["parameters"] if name.startswith("solids[")] if chosen else []
     if geometry:

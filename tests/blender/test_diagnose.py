@@ -163,8 +163,8 @@ def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_w
     assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'FINISHED'}, vs.diagnose_job.error
     assert vs.diagnosis_conclusion == "missing effect: shear_thinning", vs.diagnosis_report
     assert vs.diagnosis_effect == "shear_thinning"
-    before, after = (float(x.rstrip(" %;")) for x in
-                     vs.diagnosis_report.splitlines()[0].split("track ")[1].split(" → "))
+    errors = next(line for line in vs.diagnosis_report.splitlines() if line.startswith("Error before → after"))
+    before, after = (float(x.rstrip(" %;")) for x in errors.split("track ")[1].split(" → "))
     assert after <= 0.5 * before, vs.diagnosis_report
 
     diagnosis = json.load(open(os.path.join(out_dir, "diagnosis.json")))
@@ -189,7 +189,7 @@ def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_w
     assert schema.PARAMETERS["flow_index"]["lower"] <= exported["flow_index"] <= 1.0
     print("\n[diagnose] power-law track (n = %.2f, exponent %.4f): %s; applied K %.4g, n %.4f; %s"
           % (n, exponent, vs.diagnosis_conclusion, fluid.consistency, fluid.flow_index,
-             vs.diagnosis_report.splitlines()[0]))
+             errors))
 
 
 def test_identify_on_a_measured_track_and_again_after_a_change(ctx, tmp_work, engine_path, use_engine):

@@ -510,6 +510,14 @@ TEST_F(IdentifyLoop, DiagnosisFindsAHiddenYieldStressOrPowerLawAndNoEffectInANew
                     diagnosis.base.heldOutE,
                     100 * d.at("errors").at("track_error").at("before").get<double>(),
                     100 * d.at("errors").at("track_error").at("after").get<double>());
+        if (d.contains("base_refit")) {
+            const json& refit = d.at("base_refit");
+            const json& other = refit.at("unused_fit");
+            std::printf("[ diagnose ]   base refit from %s's fit: %s (the other: eta %.3f, held-out E %.4g)\n",
+                        refit.at("from").get<std::string>().c_str(),
+                        refit.at("replaced_first_fit").get<bool>() ? "replaced the first fit" : "the first fit stands",
+                        other.at("parameters").at("viscosity").at("value").get<double>(), other.at("held_out_E").get<double>());
+        }
         for (const identify::ModelFit& fit : diagnosis.candidates) {
             std::printf("[ diagnose ]   %s:", fit.model.c_str());
             for (size_t i = 0; i < fit.theta.size(); ++i) std::printf(" %s = %.4g", fit.parameters[i].c_str(), fit.theta[i]);
