@@ -214,10 +214,7 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
             run.document["parameters"] = parameters;
             if (!effect.empty()) run.document["_effect"] = effect;
             // As parseJob has it: placements by generation need a single parameter.
-            if (run.parameters.size() > 1 && run.placementSchedule == PlacementSchedule::ByGeneration) {
-                run.placementSchedule = PlacementSchedule::EachEvaluation;
-                if (!run.document.contains("grid_placements")) run.gridPlacements = 1;
-            }
+            if (run.parameters.size() > 1) run.placementSchedule = PlacementSchedule::EachEvaluation;
         }
         if (!maxFrames.empty()) {
             run.maxFrames = maxFrames[r];
@@ -228,6 +225,21 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
         // then searches around (FINDINGS, "Diagnose on synthetic fronts").
         run.fidelity.coarseGenerations = 0;
     }
+    return job;
+}
+
+// A model's search over several parameters screens on one grid placement: on all of them every
+// evaluation runs each placement, where the base's one-parameter search takes one a generation, and
+// the sample cup's candidates cost 2–3× the base's per evaluation (FINDINGS, "One diagnosis of the
+// sample cup against a 30-minute budget"). Every fit is scored on all of them (scoreRun).
+Job screenedOnOnePlacement(Job job) {
+    std::vector<Job*> runs{&job};
+    for (Job& run : job.otherRuns) runs.push_back(&run);
+    for (Job* run : runs)
+        if (run->parameters.size() > 1 && run->gridPlacements > 1) {
+            run->gridPlacements = 1;
+            run->document["grid_placements"] = 1;
+        }
     return job;
 }
 
@@ -281,7 +293,10 @@ std::vector<size_t> comparedFrames(const Observation& obs) {
     return frames;
 }
 
-RunScore scoreRun(const Job& run, const Observation& obs, const std::vector<double>& theta, int fitCount) {
+// θ scored over every frame of `run`, on each of its grid placements (E their mean), whatever its
+// search took, so that every model is scored alike.
+RunScore scoreRun(Job run, const Observation& obs, const std::vector<double>& theta, int fitCount) {
+    run.placementSchedule = PlacementSchedule::EachEvaluation;
     const Evaluation ev = evaluate(run, obs, theta, run.resolution);
     const std::vector<size_t> frames = comparedFrames(obs);
     const std::vector<size_t> fitted(frames.begin(), frames.begin() + fitCount), heldOut(frames.begin() + fitCount, frames.end());
@@ -514,7 +529,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         else
             identifyOptions.knownPoint = equivalents.back();
         json series;
-        diagnosis.candidates.push_back(fitModel(name, full, modelJob(base, name, parameters, fitCounts), observations,
+        diagnosis.candidates.push_back(fitModel(name, full, screenedOnOnePlacement(modelJob(base, name, parameters, fitCounts)), observations,
                                                 fitCounts, outDir / "fits" / name, identifyOptions, budget.nextSearch(),
                                                 series));
         budget.spend(diagnosis.candidates.back());
