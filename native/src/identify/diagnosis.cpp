@@ -209,8 +209,9 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
             run.parameters.clear();
             for (size_t i = 0; i < parameters.size(); ++i)
                 run.parameters.push_back(parseSearchedParameter(
-                    parameters[i], run.scene, run.file.string() + ": diagnosis " + (effect.empty() ? "base" : effect) + ": parameters[" +
-                                                 std::to_string(i) + "]"));
+                    parameters[i], run.scene,
+                    run.file.string() + ": diagnosis " + (effect.empty() ? "base" : effect) + ": parameters[" +
+                        std::to_string(i) + "]"));
             run.document["parameters"] = parameters;
             if (!effect.empty()) run.document["_effect"] = effect;
             // As parseJob has it: placements by generation need a single parameter.
@@ -529,9 +530,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         else
             identifyOptions.knownPoint = equivalents.back();
         json series;
-        diagnosis.candidates.push_back(fitModel(name, full, screenedOnOnePlacement(modelJob(base, name, parameters, fitCounts)), observations,
-                                                fitCounts, outDir / "fits" / name, identifyOptions, budget.nextSearch(),
-                                                series));
+        const Job fitting = screenedOnOnePlacement(modelJob(base, name, parameters, fitCounts));
+        diagnosis.candidates.push_back(fitModel(name, full, fitting, observations, fitCounts, outDir / "fits" / name,
+                                                identifyOptions, budget.nextSearch(), series));
         budget.spend(diagnosis.candidates.back());
         candidateSeries.push_back(series);
     }
