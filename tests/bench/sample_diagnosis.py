@@ -83,6 +83,13 @@ def main():
               f"(budget {fit['time_budget_s']:.0f}), scoring {fit['scoring_seconds']:.0f} s; fitted E "
               f"{fit['fitted_E']:.4g}, held-out E {fit['held_out_E']:.4g}, BIC {fit['bic']:.1f}"
               + (f", held-out gain {fit['held_out_gain']:+.2f}" if "held_out_gain" in fit else ""))
+    if "base_refit" in report:
+        refit = report["base_refit"]
+        other = refit["unused_fit"]
+        values = ", ".join("%s %.4g" % (name, p["value"]) for name, p in other["parameters"].items())
+        outcome = "replaced the first fit" if refit["replaced_first_fit"] else "the first fit stands"
+        print(f"  base refit from {refit['from']}'s fit: {outcome} (the other: {values}, "
+              f"held-out E {other['held_out_E']:.4g})")
     for skipped in report["not_tried"]:
         print(f"  not tried: {skipped['effect']} ({skipped['why']})")
     print(f"conclusion: {report['conclusion']}; E before {report['errors']['E']['before']:.4g}, "
