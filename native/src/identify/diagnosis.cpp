@@ -195,12 +195,24 @@ std::function<std::vector<double>(double)> powerLawRidge(const json& parameters,
     };
 }
 
+// The job and each of its other runs, to change in place.
+std::vector<Job*> everyRun(Job& job) {
+    std::vector<Job*> runs{&job};
+    for (Job& run : job.otherRuns) runs.push_back(&run);
+    return runs;
+}
+
+std::vector<std::string> parameterNames(const Job& job) {
+    std::vector<std::string> names;
+    for (const ParameterSpec& p : job.parameters) names.push_back(p.name());
+    return names;
+}
+
 // The job of a model: the base job with the effect's scene (none: the base's) and `parameters` (none:
 // the base's) in every run, limited to `maxFrames[r]` compared frames in run r when given.
 Job modelJob(const Job& base, const std::string& effect, const json& parameters, const std::vector<int>& maxFrames) {
     Job job = base;
-    std::vector<Job*> runs{&job};
-    for (Job& run : job.otherRuns) runs.push_back(&run);
+    const std::vector<Job*> runs = everyRun(job);
     const double eta = job.scene.material.viscosity;
     for (size_t r = 0; r < runs.size(); ++r) {
         Job& run = *runs[r];
@@ -234,9 +246,7 @@ Job modelJob(const Job& base, const std::string& effect, const json& parameters,
 // the sample cup's candidates cost 2–3× the base's per evaluation (FINDINGS, "One diagnosis of the
 // sample cup against a 30-minute budget"). Every fit is scored on all of them (scoreRun).
 Job screenedOnOnePlacement(Job job) {
-    std::vector<Job*> runs{&job};
-    for (Job& run : job.otherRuns) runs.push_back(&run);
-    for (Job* run : runs)
+    for (Job* run : everyRun(job))
         if (run->parameters.size() > 1 && run->gridPlacements > 1) {
             run->gridPlacements = 1;
             run->document["grid_placements"] = 1;
@@ -488,11 +498,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
 
     Diagnosis diagnosis;
     json baseSeries;
-    if (options.onFit) {
-        std::vector<std::string> names;
-        for (const ParameterSpec& p : job.parameters) names.push_back(p.name());
-        options.onFit("base", 0, fits, names);
-    }
+    if (options.onFit) options.onFit("base", 0, fits, parameterNames(job));
     FitBudget budget(options.timeBudget, fits);
     diagnosis.base = fitModel("base", job, modelJob(job, "", {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
                               options.identify, budget.nextSearch(), baseSeries);
@@ -512,11 +518,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         }
         // The base fit's values in every run's scene, where the effect's model takes its K from.
         Job base = job;
-        for (Job* run : [&] {
-                 std::vector<Job*> runs{&base};
-                 for (Job& other : base.otherRuns) runs.push_back(&other);
-                 return runs;
-             }())
+        for (Job* run : everyRun(base))
             for (size_t i = 0; i < run->parameters.size(); ++i)
                 setParameter(run->scene, run->parameters[i].parameter, diagnosis.base.theta[i]);
         const Job& full = models.emplace_back(modelJob(base, name, parameters, {}));
@@ -561,11 +563,8 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         const ModelFit& from = diagnosis.candidates[*challenger];
         const std::vector<double> start = apparentBase(from, models[*challenger], job);
         json parameters = json::array();
-        std::vector<std::string> names;
-        for (size_t i = 0; i < job.parameters.size(); ++i) {
-            parameters.push_back(warmStart(job.parameters[i], start[i]));
-            names.push_back(job.parameters[i].name());
-        }
+        for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], start[i]));
+        const std::vector<std::string> names = parameterNames(job);
         if (options.onFit) options.onFit("base_refit", fits, fits + 1, names);
         IdentifyOptions identifyOptions = options.identify;
         identifyOptions.knownPoint = diagnosis.base.theta;
