@@ -102,8 +102,10 @@ std::string withEffect(Scene& scene, const std::string& effect, double eta) {
     return "";
 }
 
-// The base's parameters and the effect's as a job's "parameters", or a reason the job cannot take it.
-std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::string& effect, json& out) {
+// The base's parameters and the effect's as a job's "parameters", or a reason the job cannot take it;
+// `shearRate` is the base flow's, where its forward model reports one.
+std::string effectParameters(const Job& job, const std::vector<double>& theta, const std::optional<double>& shearRate,
+                             const std::string& effect, json& out) {
     out = json::array();
     const int eta = indexOf(job, "viscosity");
     const bool materialLaw = effect == "shear_thinning" || effect == "yield_stress";
@@ -129,9 +131,11 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         // η*/3: above η* lies a plateau of near-Newtonian fits (K ≈ η*, τ_y a few Pa) that the search
         // stayed on. Not from K + τ_y/γ̇_c = η*: the base flow's γ̇_c is not the rate of a flow with
         // plugs, and that start fitted a hidden yield stress worse (FINDINGS, "Diagnose on synthetic
-        // fronts"). τ_y within [1 %, 100 %] of the liquid's hydrostatic stress ρ g h₀, from a tenth
-        // of it: below, a yield stress hardly changes the flow and E is flat over many decades of
-        // ln τ_y, where the search drifted (FINDINGS, as above).
+        // fronts"). τ_y up to the liquid's hydrostatic stress ρ g h₀, from a tenth of it, and down to
+        // 1 % of it: below, a yield stress hardly changes the flow and E is flat over many decades of
+        // ln τ_y, where the search drifted (FINDINGS, as above). Down to 1 % of the base flow's
+        // viscous stress η* γ̇_c where that is less: the least τ_y is the base-equivalent point, and
+        // in a slow flow 1 % of ρ g h₀ arrests the front (FINDINGS, "A yield stress's least value").
         const ParameterSpec& p = job.parameters[eta];
         json consistency = searched("consistency", theta[eta] / 3, 1.0);
         consistency["min"] = std::max(p.lower, theta[eta] / 100);
@@ -141,7 +145,7 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         json yieldStress = searched("yield_stress", d.searchInitial, kNewLogSpread);
         if (const double stress = hydrostaticStress(job.scene); stress > 0) {
             yieldStress = searched("yield_stress", 0.1 * stress, 1.0);
-            yieldStress["min"] = 0.01 * stress;
+            yieldStress["min"] = shearRate ? std::min(0.01 * stress, 0.01 * theta[eta] * *shearRate) : 0.01 * stress;
             yieldStress["max"] = stress;
         }
         out.push_back(yieldStress);
@@ -485,7 +489,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                            std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
         if (!asked) continue;
         json parameters;
-        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), effect.name, parameters);
+        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), std::nullopt, effect.name, parameters);
         if (why.empty()) {
             Scene probe = job.scene;
             why = withEffect(probe, effect.name, job.scene.material.viscosity);
@@ -510,7 +514,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     for (size_t c = 0; c < candidates.size(); ++c) {
         const std::string name = candidates[c]->name;
         json parameters;
-        effectParameters(job, diagnosis.base.theta, name, parameters);
+        effectParameters(job, diagnosis.base.theta, diagnosis.base.shearRate, name, parameters);
         if (options.onFit) {
             std::vector<std::string> names;
             for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());
