@@ -145,7 +145,7 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         json yieldStress = searched("yield_stress", d.searchInitial, kNewLogSpread);
         if (const double stress = hydrostaticStress(job.scene); stress > 0) {
             yieldStress = searched("yield_stress", 0.1 * stress, 1.0);
-            yieldStress["min"] = shearRate ? std::min(0.01 * stress, 0.01 * theta[eta] * *shearRate) : 0.01 * stress;
+            yieldStress["min"] = std::min(0.01 * stress, shearRate ? 0.01 * theta[eta] * *shearRate : INFINITY);
             yieldStress["max"] = stress;
         }
         out.push_back(yieldStress);
@@ -489,7 +489,8 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                            std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
         if (!asked) continue;
         json parameters;
-        std::string why = effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), std::nullopt, effect.name, parameters);
+        std::string why =
+            effectParameters(job, std::vector<double>(job.parameters.size(), 1.0), std::nullopt, effect.name, parameters);
         if (why.empty()) {
             Scene probe = job.scene;
             why = withEffect(probe, effect.name, job.scene.material.viscosity);
