@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -131,6 +132,15 @@ json radiusJob() {
             {"seed", 5}};
 }
 
+// diagnosis.json's entries of the first base fit and of its refit (null when none ran): the refit's
+// "unused_fit" is whichever of the two the candidates were not judged against.
+std::array<json, 2> firstBaseAndRefit(const json& doc) {
+    if (!doc.contains("base_refit")) return {doc.at("base"), json()};
+    const json& refit = doc.at("base_refit");
+    if (refit.at("replaced_first_fit").get<bool>()) return {refit.at("unused_fit"), doc.at("base")};
+    return {doc.at("base"), refit.at("unused_fit")};
+}
+
 struct HiddenEffect {
     const char* expected;  // the effect diagnose should name; "" for none
     json material;
@@ -187,10 +197,7 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
         // Each candidate also scores its base-equivalent point (n = 1, τ_y and the slip length at
         // their least, from the first base fit), "known" in its checkpoint, and ends no worse; a
         // power law at n = 1 is that base fit itself.
-        const json& refit = d.document.value("base_refit", json::object());
-        const double firstBaseE = refit.value("replaced_first_fit", false)
-                                      ? refit.at("unused_fit").at("fitted_E").get<double>()
-                                      : d.base.fittedE;
+        const double firstBaseE = firstBaseAndRefit(d.document)[0].at("fitted_E").get<double>();
         for (size_t c = 0; c < d.candidates.size(); ++c) {
             const fs::path folder = d.document.at("candidates")[c].at("folder").get<std::string>();
             const json evaluated = json::parse(std::ifstream(dir / "out" / folder / "checkpoint.json")).at("evaluated");
@@ -219,14 +226,10 @@ TEST(FilmDiagnosis, SharesItsTimeBudgetAmongTheFits) {
     const identify::Diagnosis d = identify::diagnose(identify::loadJob(dir / "job.json"), dir / "out", options);
     // The fits in the order they ran, as diagnosis.json has them.
     const json& doc = d.document;
-    const bool refitted = doc.contains("base_refit");
-    std::vector<json> fits{refitted && doc.at("base_refit").at("replaced_first_fit").get<bool>()
-                               ? doc.at("base_refit").at("unused_fit")
-                               : doc.at("base")};
+    const auto [first, refit] = firstBaseAndRefit(doc);
+    std::vector<json> fits{first};
     for (const json& candidate : doc.at("candidates")) fits.push_back(candidate);
-    if (refitted)
-        fits.push_back(doc.at("base_refit").at("replaced_first_fit").get<bool>() ? doc.at("base")
-                                                                                 : doc.at("base_refit").at("unused_fit"));
+    if (!refit.is_null()) fits.push_back(refit);
     const int planned = 1 + static_cast<int>(d.candidates.size());
     double spent = 0, lastScoring = 0;
     for (size_t f = 0; f < fits.size(); ++f) {
@@ -260,7 +263,7 @@ TEST(FilmDiagnosis, RefitsAnUnconvergedBaseBeforeNamingAnEffect) {
     std::ofstream(dir / "job.json") << job.dump();
     const identify::Diagnosis d = identify::diagnose(identify::loadJob(dir / "job.json"), dir / "out");
     const json& refit = d.document.at("base_refit");
-    const json& first = refit.at("replaced_first_fit").get<bool>() ? refit.at("unused_fit") : d.document.at("base");
+    const json first = firstBaseAndRefit(d.document)[0];
     std::printf("first base: viscosity %.4g, held-out E %.3g\n", first.at("parameters").at("viscosity").at("value").get<double>(),
                 first.at("held_out_E").get<double>());
     for (const identify::ModelFit& fit : d.candidates) {

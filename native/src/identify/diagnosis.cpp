@@ -135,7 +135,8 @@ std::string effectParameters(const Job& job, const std::vector<double>& theta, c
         // 1 % of it: below, a yield stress hardly changes the flow and E is flat over many decades of
         // ln τ_y, where the search drifted (FINDINGS, as above). Down to 1 % of the base flow's
         // viscous stress η* γ̇_c where that is less: the least τ_y is the base-equivalent point, and
-        // in a slow flow 1 % of ρ g h₀ arrests the front (FINDINGS, "A yield stress's least value").
+        // in a slow flow 1 % of ρ g h₀ arrests the front (FINDINGS, "The particle-laden dam break
+        // with every candidate").
         const ParameterSpec& p = job.parameters[eta];
         json consistency = searched("consistency", theta[eta] / 3, 1.0);
         consistency["min"] = std::max(p.lower, theta[eta] / 100);
