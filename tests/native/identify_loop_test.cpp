@@ -7,6 +7,7 @@
 #include "identify/identify.h"
 #include "identify/search_state.h"
 
+#include "collapsing_column.h"
 #include "sim/sim.h"
 #include "surface/surface.h"
 
@@ -30,22 +31,12 @@ namespace {
 
 namespace fs = std::filesystem;
 using namespace viscoscope;
+using column::columnJobJson;
+using column::sceneJson;
+using column::writeMeasuredTrack;
 using json = nlohmann::json;
 
 constexpr double kEtaTrue = 3.0;
-
-json sceneJson(double eta, int resolution, unsigned seed, int frames) {
-    return {{"format", "viscoscope.scene"},
-            {"version", 1},
-            {"domain", {{"min", {0, 0, 0}}, {"max", {0.1, 0.04, 0.06}}, {"resolution", resolution}}},
-            {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
-            {"liquids", {{{"type", "box"}, {"min", {0.0, 0.0, 0.0}}, {"max", {0.035, 0.04, 0.045}}}}},
-            {"material", {{"density", 1400}, {"viscosity", eta}, {"surface_tension", 0.0}}},
-            {"fps", 30},
-            {"frames", frames},
-            {"seed", seed},
-            {"output", {{"particles", false}, {"vdb", false}, {"mesh", false}}}};
-}
 
 // A side camera looking along +y at the x–z plane; `scale` multiplies the image size and focal length.
 json cameraJson(int scale) {
@@ -108,16 +99,10 @@ protected:
     }
 
     static json jobJson() {
-        return {{"format", "viscoscope.job"},
-                {"version", 1},
-                {"scene", "scene.json"},
-                {"camera", "camera.json"},
-                {"silhouettes", "reference"},
-                {"parameters", {{{"name", "viscosity"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 1e-2}, {"max", 1e3}}}},
-                {"resolution", 20},  // at 16³ the E minimum sat ~9 % above the truth
-                {"max_generations", 12},
-                {"tolerance_x", 0.01},
-                {"seed", 3}};
+        json doc = columnJobJson();
+        doc["camera"] = "camera.json";
+        doc["silhouettes"] = "reference";
+        return doc;
     }
     static identify::Job job(const json& doc) {
         std::ofstream(dir_ / "job.json") << doc.dump(1);
@@ -414,24 +399,6 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
-// The reference run of `scene` (its resolution and seed) sampled `fps` times a second for `frames`
-// frames (by default 60 times a second for a third of a second) into a CSV, as a lab would measure it: the front along x from `gate`, and the reach from the
-// vertical through `wall`.
-void writeMeasuredTrack(json scene, const Eigen::Vector3d& gate, const Eigen::Vector3d& wall, const fs::path& file,
-                        int frames = 20, int fps = 60) {
-    scene["fps"] = fps;
-    sim::Simulation reference(parseScene(scene, "reference scene"));
-    const GroundObservables ground{0.0, 0.005};
-    std::ofstream csv(file);
-    csv << "time_s,front_m,radius_m\n";
-    for (int frame = 0; frame <= frames; ++frame) {
-        if (frame > 0) reference.advanceFrame();
-        const auto& particles = reference.particles().position;
-        csv << double(frame) / fps << "," << frontAlongGround(particles, gate, Eigen::Vector3d::UnitX(), ground) << ","
-            << puddleDiameter(particles, wall, ground) / 2 << "\n";
-    }
-}
-
 // A measured track alone, like a lab's front positions, with no camera and no silhouettes: the
 // column's front along the ground, and its reach from the vertical through the middle of the wall it
 // leans on (the "radius" observable), sampled 60 times a second from the reference simulation (24
@@ -462,76 +429,6 @@ TEST_F(IdentifyLoop, RecoversViscosityFromAMeasuredTrackAlone) {
         EXPECT_EQ(result.document.at("frames").get<int>(), 10) << observable;
         EXPECT_LT(trackError, 0.05) << observable;
         fs::remove_all(dir_ / "track_out");
-    }
-}
-
-// A yield stress or shear thinning nobody declared, and a Newtonian control: the column's front
-// measured from a reference run (24 cells, seed 11) of a Bingham liquid (τ_y = 60 Pa, K = 10 Pa·s), a
-// power-law one (K = 20 Pa·sⁿ, n = 0.4) and a Newtonian one (η = 10 Pa·s), 15 times a second for
-// `kDiagnosisFrames` frames. diagnose fits η on the job's 16-cell grid (seed 3), then shear thinning
-// and a yield stress, each to the first two thirds of the front, and predicts the rest.
-TEST_F(IdentifyLoop, DiagnosisFindsAHiddenYieldStressOrPowerLawAndNoEffectInANewtonianControl) {
-    constexpr int kDiagnosisFrames = 30, kDiagnosisFps = 15;
-    const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0);
-    const json bingham{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0},
-                       {"model", {{"type", "herschel_bulkley"}, {"yield_stress", 60.0}, {"consistency", 10.0}, {"flow_index", 1.0}}}};
-    const json powerLaw{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0},
-                        {"model", {{"type", "power_law"}, {"consistency", 20.0}, {"flow_index", 0.4}}}};
-    const json newtonian{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0}};
-    const std::map<std::string, std::string> hiddenEffect{{"bingham", "yield_stress"}, {"power_law", "shear_thinning"}};
-    for (const auto& [label, material] : {std::pair<const char*, json>{"bingham", bingham}, {"power_law", powerLaw},
-                                          {"newtonian", newtonian}}) {
-        json reference = sceneJson(10.0, 24, 11, kDiagnosisFrames);
-        reference["material"] = material;
-        const std::string csv = std::string(label) + "_front.csv";
-        writeMeasuredTrack(reference, gate, wall, dir_ / csv, kDiagnosisFrames, kDiagnosisFps);
-        json doc = jobJson();
-        doc.erase("camera");
-        doc.erase("silhouettes");
-        json scene = sceneJson(10.0, 16, 3, kDiagnosisFrames);
-        scene["fps"] = kDiagnosisFps;
-        doc["scene"] = scene;
-        doc["track"] = {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
-                        {"origin", {gate.x(), gate.y(), gate.z()}}, {"direction", {1, 0, 0}}};
-        doc["max_generations"] = 12;
-        identify::DiagnoseOptions options;
-        options.effects = {"shear_thinning", "yield_stress"};
-        const auto started = std::chrono::steady_clock::now();
-        const identify::Diagnosis diagnosis = identify::diagnose(job(doc), dir_ / (std::string(label) + "_diagnosis"), options);
-        const json& d = diagnosis.document;
-        // The base flow's shear rate, where the material laws start.
-        ASSERT_TRUE(diagnosis.base.shearRate.has_value());
-        EXPECT_GT(*diagnosis.base.shearRate, 0.0);
-        EXPECT_EQ(d.at("base").at("shear_rate_per_s").get<double>(), *diagnosis.base.shearRate);
-        std::printf("[ diagnose ] %s (%.0f s): %s; base eta %.3f (shear rate %.3g 1/s), held-out E %.4g, track error "
-                    "%.2f %% -> %.2f %%\n",
-                    label, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count(),
-                    d.at("conclusion").get<std::string>().c_str(), diagnosis.base.theta[0], *diagnosis.base.shearRate,
-                    diagnosis.base.heldOutE,
-                    100 * d.at("errors").at("track_error").at("before").get<double>(),
-                    100 * d.at("errors").at("track_error").at("after").get<double>());
-        if (d.contains("base_refit")) {
-            const json& refit = d.at("base_refit");
-            const json& other = refit.at("unused_fit");
-            std::printf("[ diagnose ]   base refit from %s's fit: %s (the other: eta %.3f, held-out E %.4g)\n",
-                        refit.at("from").get<std::string>().c_str(),
-                        refit.at("replaced_first_fit").get<bool>() ? "replaced the first fit" : "the first fit stands",
-                        other.at("parameters").at("viscosity").at("value").get<double>(), other.at("held_out_E").get<double>());
-        }
-        for (const identify::ModelFit& fit : diagnosis.candidates) {
-            std::printf("[ diagnose ]   %s:", fit.model.c_str());
-            for (size_t i = 0; i < fit.theta.size(); ++i) std::printf(" %s = %.4g", fit.parameters[i].c_str(), fit.theta[i]);
-            std::printf("; held-out E %.4g, BIC %.1f (base %.1f), %ld evaluations\n", fit.heldOutE, fit.bic,
-                        diagnosis.base.bic, fit.evaluations);
-        }
-        if (const auto hidden = hiddenEffect.find(label); hidden != hiddenEffect.end()) {
-            ASSERT_TRUE(diagnosis.chosen.has_value()) << label;
-            EXPECT_EQ(diagnosis.candidates[*diagnosis.chosen].model, hidden->second);
-            EXPECT_LE(d.at("errors").at("track_error").at("after").get<double>(),
-                      0.5 * d.at("errors").at("track_error").at("before").get<double>());
-        } else {
-            EXPECT_FALSE(diagnosis.chosen.has_value()) << d.at("conclusion");
-        }
     }
 }
 

@@ -1,12 +1,12 @@
 // `viscoscope diagnose job.json --out DIR`: the base model and each candidate effect fitted to the
-// first part of the reference and scored on the rest (identify/diagnosis.h). Re-running with the
+// first part of the reference and scored on the rest (diagnose/diagnose.h). Re-running with the
 // same --out resumes: each fit keeps its checkpoint in DIR/fits/<model>. SIGTERM/SIGINT: the current
 // generation finishes, its checkpoint is written and the command exits 3.
 #include "cli/commands.h"
 #include "cli/output_lock.h"
 #include "cli/progress.h"
 #include "cli/scripts.h"
-#include "identify/identify.h"
+#include "diagnose/diagnose.h"
 
 #include <openvdb/openvdb.h>
 
@@ -31,7 +31,7 @@ int runDiagnose(const DiagnoseArguments& args) {
     const identify::Job job = identify::loadJob(args.job);
     const OutputFolderLock lock(args.outDir, "diagnose");
     const ProgressReporter progress(args.progress);
-    identify::DiagnoseOptions options;
+    diagnose::DiagnoseOptions options;
     options.fitShare = args.fitShare;
     options.effects = args.effects;
     options.timeBudget = args.timeBudget;
@@ -51,7 +51,7 @@ int runDiagnose(const DiagnoseArguments& args) {
         progress.report(event);
     };
     try {
-        const identify::Diagnosis diagnosis = identify::diagnose(job, args.outDir, options);
+        const diagnose::Diagnosis diagnosis = diagnose::diagnose(job, args.outDir, options);
         const nlohmann::json& doc = diagnosis.document;
         progress.report({{"event", "done"},
                          {"stage", "diagnose"},
@@ -71,7 +71,7 @@ int runDiagnose(const DiagnoseArguments& args) {
 Command addDiagnoseCommand(CLI::App& app) {
     auto args = std::make_shared<DiagnoseArguments>();
     std::ostringstream effects;
-    for (const identify::Effect& e : identify::diagnosisEffects()) effects << (effects.tellp() ? ", " : "") << e.name;
+    for (const diagnose::Effect& e : diagnose::effects()) effects << (effects.tellp() ? ", " : "") << e.name;
     CLI::App* sub = app.add_subcommand("diagnose", "Find the effect the model lacks: fit the job's model and each "
                                                    "candidate effect to the first part of the reference, predict "
                                                    "the rest, report the error before and after");

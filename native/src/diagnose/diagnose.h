@@ -1,12 +1,13 @@
-// Diagnosis: from the residual of the best fit to the physical effect the model lacks (DESIGN.md,
-// "Diagnosis: closing the loop"). The job's model (the base) and each candidate effect the scene can
-// hold are fitted to the first part of the reference (each its own identification) and scored on
-// all of it; a candidate is chosen only when it predicts the held-out rest better than the base by
-// a clear margin and pays for its parameters in the fitted part (BIC), else "no missing effect".
+// The diagnose stage's face: from the residual of the best fit to the physical effect the model
+// lacks (DESIGN.md, "Diagnosis: closing the loop"). The job's model (the base) and each candidate
+// effect the scene can hold (effect.h, effects()) are fitted to the first part of the reference
+// (each its own identification) and scored on all of it; a candidate is chosen only when it
+// predicts the held-out rest better than the base by a clear margin and pays for its parameters in
+// the fitted part (BIC), else "no missing effect".
 #pragma once
 
-#include "identify/identification.h"
-#include "identify/job.h"
+#include "diagnose/effect.h"
+#include "identify/identify.h"
 
 #include <nlohmann/json.hpp>
 
@@ -17,21 +18,19 @@
 #include <string>
 #include <vector>
 
-namespace viscoscope::identify {
+namespace viscoscope::diagnose {
 
-// The effects a diagnosis can add, each a model the engine simulates (sim/material_model.h, solids).
-struct Effect {
-    const char* name;         // as diagnosis.json and --effects name it
-    const char* description;  // what it adds, one line
-    const char* source;       // the law's source, one line
-};
-const std::vector<Effect>& diagnosisEffects();
+// Every effect diagnose can add, in the order it fits them.
+const std::vector<Effect>& effects();
 
 struct DiagnoseOptions {
-    IdentifyOptions identify;  // for every fit (its fields are not written)
+    identify::IdentifyOptions identify;  // for every fit (its fields are not written)
     // The share of each run's compared frames fitted; the later rest is predicted and scored.
     double fitShare = 2.0 / 3;
-    std::vector<std::string> effects;  // the candidates; empty: every effect the scene can hold
+    // The candidates by name; empty: every effect of `catalogue` the scene can hold.
+    std::vector<std::string> effects;
+    // The effects to choose from; null: effects().
+    const std::vector<Effect>* catalogue = nullptr;
     // Wall seconds for the whole diagnosis (0: each fit has the job's own time_budget_s). Each fit's
     // search gets an equal share of what the fits before it left, less the time its scoring on
     // every frame is predicted to take.
@@ -57,7 +56,7 @@ struct ModelFit {
     double seconds = 0;          // the search's
     double scoringSeconds = 0;   // θ* simulated again over every frame of every run
     double timeBudget = 0;       // the search's share of the diagnosis's budget (0: the job's own)
-    std::optional<StopReason> stop;  // why the search ended; none when there was nothing to search
+    std::optional<identify::StopReason> stop;  // why the search ended; none when there was nothing to search
     // The material θ* implies, as a scene file's "material" holds it: what the add-on applies.
     nlohmann::json material;
 };
@@ -72,6 +71,6 @@ struct Diagnosis {
 // Runs (or resumes: each fit keeps its own checkpoint under OUT/fits/<model>) the diagnosis and writes
 // OUT/diagnosis.json. Throws InputError when the reference has too few frames to hold any out, or an
 // asked-for effect is unknown or one the scene cannot hold; Cancelled on a cancel request.
-Diagnosis diagnose(const Job& job, const std::filesystem::path& outDir, const DiagnoseOptions& options = {});
+Diagnosis diagnose(const identify::Job& job, const std::filesystem::path& outDir, const DiagnoseOptions& options = {});
 
-}  // namespace viscoscope::identify
+}  // namespace viscoscope::diagnose

@@ -1,0 +1,334 @@
+// Diagnosis: fit the base model and each candidate effect to the first part of every run, predict
+// the rest, and keep an effect only when it earns its parameters there.
+//
+// Out of sample, because in sample any added parameter lowers E: the fit sees each run's first
+// fitShare of compared frames, and the held-out later frames are where a missing effect shows most
+// (a front that stops in the footage but not in the simulation, a flow that slows differently). A
+// candidate is chosen when (a) its held-out E is below (1 − kHeldOutGain) of the base's and (b) its
+// BIC over the fitted frames is below the base's; of those, the one with the least held-out E.
+#include "diagnose/diagnose.h"
+
+#include "diagnose/effects/effects.h"
+#include "diagnose/model_fit.h"
+#include "sim/sim.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace viscoscope::diagnose {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+using namespace identify;
+
+namespace {
+
+// The held-out improvement a candidate must make: a fifth of the base's held-out E, so that a
+// candidate which only moves within the fits' own scatter (grid, seed) is not taken for an effect.
+constexpr double kHeldOutGain = 0.2;
+// A fit whose added parameters all end within this log distance of their base-equivalent values (n
+// = 1, τ_y or the slip at its least, the channel at its widest) is the base model: when it predicts
+// better, the base fit was not converged, which is not an effect (on the measured particle-laden dam
+// break the power law ended at n = 1 with a better η than the base's: tests/bench/FINDINGS.md,
+// "Diagnose on the measured particle-laden syrup dam break").
+constexpr double kVanishedLogDistance = 0.01;
+
+// A searched parameter of the base, restarted at the base fit within its own bounds.
+json warmStart(const ParameterSpec& p, double theta) {
+    json spec = searchedParameter(p.name(), theta, kWarmLogSpread);
+    spec["min"] = p.lower;
+    spec["max"] = p.upper;
+    return spec;
+}
+
+// An effect as one fit of the diagnosis: the model's "parameters" (the base's kept ones restarted
+// at the base fit, then the effect's) and what the effect added.
+struct Candidate {
+    const Effect* effect = nullptr;
+    json parameters = json::array();
+    std::vector<AddedParameter> added;
+};
+
+// The candidate of `effect` for `base`, or why the base's job cannot take it.
+std::string candidateFor(const Effect& effect, const BaseFit& base, Candidate& candidate) {
+    candidate = {&effect, json::array(), {}};
+    const Job& job = base.job;
+    if (effect.law) {
+        if (!base.value("viscosity")) return "the job does not search the viscosity the law replaces";
+        if (!std::holds_alternative<Newtonian>(job.scene.material.model)) return "the base model is not Newtonian";
+    }
+    for (size_t i = 0; i < job.parameters.size(); ++i)
+        if (!(effect.law && job.parameters[i].name() == "viscosity"))
+            candidate.parameters.push_back(warmStart(job.parameters[i], base.theta[i]));
+    if (std::string why = effect.parameters(base, candidate.added); !why.empty()) return why;
+    for (const AddedParameter& p : candidate.added) candidate.parameters.push_back(p.spec);
+    return "";
+}
+
+const AddedParameter* findAdded(const Candidate& candidate, const std::string& name) {
+    for (const AddedParameter& p : candidate.added)
+        if (p.spec.at("name") == name) return &p;
+    return nullptr;
+}
+
+// A candidate's parameters where its effect vanishes (AddedParameter::vanishesAt), the base fit's
+// values for the rest. Scored with the fit's first generation, so that no candidate ends worse than
+// the base in sample: from their own starts, the measured syrup dam break's material laws did
+// (tests/bench/FINDINGS.md, "Diagnose on the measured syrup dam break"); and where a fit ends here,
+// it is the base model (effectVanishes).
+std::vector<double> baseEquivalent(const Job& model, const Candidate& candidate, const BaseFit& base) {
+    std::vector<double> theta;
+    for (const ParameterSpec& p : model.parameters) {
+        const AddedParameter* added = findAdded(candidate, p.name());
+        const double value = added ? added->vanishesAt : *base.value(p.name());
+        theta.push_back(std::clamp(value, p.lower, p.upper));
+    }
+    return theta;
+}
+
+// Whether `fit` ended where its effect vanishes: each parameter the effect adds (not one that stands
+// for a base parameter) within kVanishedLogDistance of its value in `equivalent`.
+bool effectVanishes(const ModelFit& fit, const Candidate& candidate, const std::vector<double>& equivalent) {
+    for (size_t i = 0; i < fit.parameters.size(); ++i) {
+        const AddedParameter* added = findAdded(candidate, fit.parameters[i]);
+        if (added && !added->standsForBase && std::abs(std::log(fit.theta[i] / equivalent[i])) > kVanishedLogDistance)
+            return false;
+    }
+    return true;
+}
+
+// Where a candidate's fit puts the base: the base's parameters it shares at their fitted values, and
+// the viscosity a material law takes the place of at the law's apparent viscosity at the fitted
+// flow's shear rate (at 1 s⁻¹ where the forward model reports none, the thin film: the consistency of
+// a power law, K + τ_y of a Bingham liquid).
+std::vector<double> apparentBase(const ModelFit& fit, const Job& model, const Job& base) {
+    const Material material = sceneWithParameters(model, fit.theta, model.resolution).material;
+    std::vector<double> theta;
+    for (const ParameterSpec& p : base.parameters) {
+        const auto shared = std::find(fit.parameters.begin(), fit.parameters.end(), p.name());
+        const double value = shared != fit.parameters.end() ? fit.theta[shared - fit.parameters.begin()]
+                                                            : sim::apparentViscosity(material, fit.shearRate.value_or(1.0));
+        theta.push_back(std::clamp(value, p.lower, p.upper));
+    }
+    return theta;
+}
+
+std::string effectNames(const std::vector<Effect>& catalogue) {
+    std::string names;
+    for (const Effect& e : catalogue) names += (names.empty() ? "" : ", ") + e.name;
+    return names;
+}
+
+}  // namespace
+
+json searchedParameter(const std::string& name, double initial, double logSpread) {
+    return {{"name", name}, {"initial", initial}, {"spread", initial * std::expm1(logSpread)}};
+}
+
+std::optional<double> BaseFit::value(const std::string& name) const {
+    for (size_t i = 0; i < job.parameters.size(); ++i)
+        if (job.parameters[i].name() == name) return theta[i];
+    return std::nullopt;
+}
+
+bool BaseFit::sets(const std::string& name) const {
+    return value(name) || std::any_of(job.fixed.begin(), job.fixed.end(),
+                                      [&](const FixedParameter& f) { return f.parameter.name == name; });
+}
+
+Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptions& options) {
+    if (!(options.fitShare > 0 && options.fitShare < 1))
+        throw InputError("diagnose: the fitted share must lie between 0 and 1, got " + std::to_string(options.fitShare));
+    const std::vector<Effect>& catalogue = options.catalogue ? *options.catalogue : effects();
+    for (const std::string& effect : options.effects)
+        if (std::none_of(catalogue.begin(), catalogue.end(), [&](const Effect& e) { return effect == e.name; }))
+            throw InputError("diagnose: unknown effect \"" + effect + "\" (" + effectNames(catalogue) + ")");
+    if (!(options.timeBudget >= 0 && std::isfinite(options.timeBudget)))
+        throw InputError("diagnose: the time budget must be a finite number of seconds ≥ 0 (0 = each fit's job budget), got " +
+                         formatNumber(options.timeBudget));
+    fs::create_directories(outDir);
+    Job job = jobIn;
+    prepareReference(job, outDir);
+    for (size_t k = 0; k < job.otherRuns.size(); ++k) prepareReference(job.otherRuns[k], outDir / ("run" + std::to_string(k + 1)));
+
+    // Each run's compared frames: the first fitShare of them are fitted, the rest held out.
+    std::vector<Observation> observations;
+    std::vector<int> fitCounts;
+    for (const Job& run : runsOf(job)) {
+        observations.push_back(loadObservation(run));
+        const int compared = static_cast<int>(comparedFrames(observations.back()).size());
+        const int fitted = std::max(kMinInformativeFrames, int(std::lround(options.fitShare * compared)));
+        if (compared - fitted < 2)
+            throw InputError(run.file.string() + ": diagnose: " + std::to_string(compared) +
+                             " compared frames, too few to fit " + std::to_string(fitted) +
+                             " and predict at least 2 more (a longer clip or track, or a smaller fitted share)");
+        fitCounts.push_back(fitted);
+    }
+
+    // The candidates the job can take, in the declared order.
+    std::vector<std::pair<std::string, std::string>> refused;  // effect, why
+    std::vector<const Effect*> candidates;
+    const std::vector<double> unfitted(job.parameters.size(), 1.0);
+    for (const Effect& effect : catalogue) {
+        const bool asked = options.effects.empty() ||
+                           std::find(options.effects.begin(), options.effects.end(), effect.name) != options.effects.end();
+        if (!asked) continue;
+        Candidate probe;
+        const std::string why = candidateFor(effect, {job, unfitted, std::nullopt}, probe);
+        if (why.empty()) candidates.push_back(&effect);
+        else if (!options.effects.empty()) throw InputError(job.file.string() + ": diagnose: " + effect.name + ": " + why);
+        else refused.emplace_back(effect.name, why);
+    }
+    const int fits = 1 + static_cast<int>(candidates.size());
+
+    Diagnosis diagnosis;
+    json baseSeries;
+    if (options.onFit) options.onFit("base", 0, fits, parameterNames(job));
+    FitBudget budget(options.timeBudget, fits);
+    diagnosis.base = fitModel("base", job, modelJob(job, nullptr, {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
+                              options.identify, budget.nextSearch(), baseSeries);
+    budget.spend(diagnosis.base);
+    json candidatesDoc = json::array();
+    std::vector<json> candidateSeries;
+    std::vector<Candidate> fitted;                 // each candidate as it was fitted
+    std::vector<Job> models;                       // each candidate's job over all frames
+    std::vector<std::vector<double>> equivalents;  // each candidate's base-equivalent point
+    const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
+    for (size_t c = 0; c < candidates.size(); ++c) {
+        const Effect& effect = *candidates[c];
+        const Candidate& candidate = fitted.emplace_back();
+        candidateFor(effect, baseFit, fitted.back());
+        const json& parameters = candidate.parameters;
+        if (options.onFit) {
+            std::vector<std::string> names;
+            for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());
+            options.onFit(effect.name, static_cast<int>(c + 1), fits, names);
+        }
+        // The base fit's values in every run's scene, where the effect's model takes its K from.
+        Job base = job;
+        for (Job* run : everyRun(base))
+            for (size_t i = 0; i < run->parameters.size(); ++i)
+                setParameter(run->scene, run->parameters[i].parameter, diagnosis.base.theta[i]);
+        const Job& full = models.emplace_back(modelJob(base, &effect, parameters, {}));
+        equivalents.push_back(baseEquivalent(full, candidate, baseFit));
+        // An effect with a start curve scans it from the base's own flow (where it starts: the base
+        // equivalent); the others score that point beside their first generation.
+        IdentifyOptions identifyOptions = options.identify;
+        if (effect.startCurve) identifyOptions.startCurve = effect.startCurve(parameters, baseFit);
+        if (!identifyOptions.startCurve) identifyOptions.knownPoint = equivalents.back();
+        json series;
+        const Job fitting = screenedOnOnePlacement(modelJob(base, &effect, parameters, fitCounts));
+        diagnosis.candidates.push_back(fitModel(effect.name, full, fitting, observations, fitCounts,
+                                                outDir / "fits" / effect.name, identifyOptions, budget.nextSearch(), series));
+        budget.spend(diagnosis.candidates.back());
+        candidateSeries.push_back(series);
+    }
+
+    json warnings = json::array();
+    const auto warn = [&](const std::string& line) {
+        warnings.push_back(line);
+        if (options.identify.onWarning) options.identify.onWarning(line);
+    };
+    const auto beats = [](const ModelFit& fit, const ModelFit& base) {
+        return fit.heldOutE < (1 - kHeldOutGain) * base.heldOutE && fit.bic < base.bic;
+    };
+    // An effect is judged against a base refit from where that effect's fit puts it: a base search
+    // that stopped short lets every candidate stand in for the viscosity it missed (FINDINGS, "An
+    // unconverged base"). The refit starts at the apparent base of the candidate that predicts best
+    // of those that beat the first base fit, scores that fit as a known point, and takes its place
+    // when it fits the fitted frames better.
+    std::optional<size_t> challenger;
+    for (size_t c = 0; c < diagnosis.candidates.size(); ++c)
+        if (beats(diagnosis.candidates[c], diagnosis.base) &&
+            (!challenger || diagnosis.candidates[c].heldOutE < diagnosis.candidates[*challenger].heldOutE))
+            challenger = c;
+    std::string baseFolder = "base";
+    json baseRefit;
+    if (challenger && !job.parameters.empty()) {
+        const ModelFit& from = diagnosis.candidates[*challenger];
+        const std::vector<double> start = apparentBase(from, models[*challenger], job);
+        json parameters = json::array();
+        for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], start[i]));
+        const std::vector<std::string> names = parameterNames(job);
+        if (options.onFit) options.onFit("base_refit", fits, fits + 1, names);
+        IdentifyOptions identifyOptions = options.identify;
+        identifyOptions.knownPoint = diagnosis.base.theta;
+        json series;
+        ModelFit refit = fitModel("base", job, modelJob(job, nullptr, parameters, fitCounts), observations, fitCounts,
+                                  outDir / "fits" / "base_refit", identifyOptions, budget.nextSearch(), series);
+        budget.spend(refit);
+        const bool replaces = refit.fittedE < diagnosis.base.fittedE;
+        if (replaces) {
+            std::string at;
+            for (size_t i = 0; i < names.size(); ++i) at += (i ? ", " : "") + names[i] + " " + formatNumber(start[i]);
+            warn("diagnose: the base fit had not converged: refit from where " + from.model + "'s fit puts it (" + at +
+                 "), it fits the fitted frames " +
+                 std::to_string(int(std::lround(100 * (1 - refit.fittedE / diagnosis.base.fittedE)))) +
+                 " % better, and the candidates are judged against the refit");
+            std::swap(diagnosis.base, refit);
+            std::swap(baseSeries, series);
+            baseFolder = "base_refit";
+        }
+        baseRefit = {{"from", from.model},
+                     {"replaced_first_fit", replaces},
+                     {"unused_fit", toJson(refit, series, replaces ? "base" : "base_refit")}};
+    }
+    const ModelFit& base = diagnosis.base;
+    for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
+        const ModelFit& fit = diagnosis.candidates[c];
+        const bool better = beats(fit, base);
+        const bool vanishes = effectVanishes(fit, fitted[c], equivalents[c]);
+        const bool earns = better && !vanishes;
+        if (better && vanishes)
+            warn("diagnose: " + fit.model + " ended where its effect vanishes, as the base model, yet predicts the "
+                 "held-out frames " + std::to_string(int(std::lround(100 * (1 - fit.heldOutE / base.heldOutE)))) +
+                 " % better than the base fit: the base fit is not converged (more generations or time, or fewer "
+                 "--effects to share them)");
+        if (earns && (!diagnosis.chosen || fit.heldOutE < diagnosis.candidates[*diagnosis.chosen].heldOutE))
+            diagnosis.chosen = c;
+        json entry = toJson(fit, candidateSeries[c], fit.model);
+        entry["description"] = candidates[c]->description;
+        entry["source"] = candidates[c]->source;
+        entry["held_out_gain"] = base.heldOutE > 0 ? 1 - fit.heldOutE / base.heldOutE : 0.0;
+        entry["effect_vanishes"] = vanishes;
+        entry["earns_its_parameters"] = earns;
+        candidatesDoc.push_back(entry);
+    }
+    // Each search makes its minimum generations whatever its share, so a diagnosis can end late: say
+    // so, with what would take less.
+    if (options.timeBudget > 0 && budget.spent() > options.timeBudget)
+        warn("diagnose: the fits took " + std::to_string(std::lround(budget.spent())) + " s of a " +
+                 std::to_string(std::lround(options.timeBudget)) +
+             " s budget: each search makes at least " + std::to_string(job.fidelity.minFineGenerations) +
+             " generations (a coarser grid, a shorter clip or fewer --effects take less)");
+    json notTried = json::array();
+    for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
+    const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
+    json errors{{"E", {{"before", base.wholeE}, {"after", after.wholeE}}},
+                {"held_out_E", {{"before", base.heldOutE}, {"after", after.heldOutE}}}};
+    if (base.trackError && after.trackError)
+        errors["track_error"] = {{"before", *base.trackError}, {"after", *after.trackError}};
+    diagnosis.document = {
+        {"format", "viscoscope.diagnosis"},
+        {"version", 1},
+        {"job", job.file.string()},
+        {"chosen", diagnosis.chosen ? json(after.model) : json()},
+        {"conclusion", diagnosis.chosen ? "missing effect: " + after.model : std::string("no missing effect")},
+        {"criterion", "fitted on each run's first " + std::to_string(int(std::lround(100 * options.fitShare))) +
+                          " % of compared frames; an effect earns its parameters when its E over the held-out rest is "
+                          "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +
+                          " % of the base's and its BIC over the fitted frames is below the base's"},
+        {"fitted_frames", fitCounts},
+        {"time_budget_s", options.timeBudget},
+        {"seconds", budget.spent()},
+        {"warnings", warnings},
+        {"base", toJson(base, baseSeries, baseFolder)},
+        {"candidates", candidatesDoc},
+        {"not_tried", notTried},
+        {"errors", errors}};
+    if (!baseRefit.is_null()) diagnosis.document["base_refit"] = baseRefit;
+    writeJsonAtomically(diagnosis.document, outDir / "diagnosis.json");
+    return diagnosis;
+}
+
+}  // namespace viscoscope::identify
