@@ -379,7 +379,7 @@ StepStats Simulation::step(double dt) {
     extrapolateVelocity(state_.velocity, validFace_, fractions_, active_, 2);
     // The first Picard iterate's shear rates come from the flow before this step's forces: gravity's
     // g Δt, uniform in the liquid but cut to zero at the walls, reads as a shear of g Δt / Δx there
-    // and yields a liquid at rest (a Bingham slump never arrested; tests/bench/FINDINGS.md).
+    // and yields a liquid at rest (tests/bench/FINDINGS.md, "Shear-dependent laws and yield stress").
     std::array<Field, 3> flowBeforeForces;
     if (material_->shearDependent()) flowBeforeForces = state_.velocity;
     addGravity(state_.velocity, fractions_, active_, scene_.gravity, dt);
