@@ -147,6 +147,31 @@ void forEachStencilSample(const Grid& g, const Lattice& l, const Vec3& x, Visit&
     forEachStencilSampleBeyond(g, l, x, [&](int i, double w, const Vec3& dw, const Vec3i*) { visit(i, w, dw); });
 }
 
+// A box of cells, inclusive at both ends: the cells that can hold liquid this step.
+struct CellBox {
+    Vec3i lo{0, 0, 0}, hi{0, 0, 0};
+};
+
+// The samples of a lattice within some margin of a CellBox (one more along a staggered axis).
+// Outside the active box no control volume holds liquid, so per-step passes that only concern
+// liquid stay in it instead of sweeping the whole domain.
+struct SampleBox {
+    Vec3i from, to;  // inclusive
+    bool contains(const Vec3i& c) const { return (c.array() >= from.array()).all() && (c.array() <= to.array()).all(); }
+};
+inline SampleBox nearBox(const Lattice& lattice, const CellBox& cells, int margin) {
+    return {(cells.lo - Vec3i::Constant(margin)).cwiseMax(0),
+            (cells.hi + Vec3i::Constant(margin + 1)).cwiseMin(lattice.size - Vec3i::Ones())};
+}
+// Calls visit(index, coordinates) for those samples, k slowest.
+template <class Visit>
+void forEachNearBox(const Lattice& lattice, const CellBox& cells, int margin, Visit&& visit) {
+    const SampleBox box = nearBox(lattice, cells, margin);
+    for (int k = box.from[2]; k <= box.to[2]; ++k)
+        for (int j = box.from[1]; j <= box.to[1]; ++j)
+            for (int i = box.from[0]; i <= box.to[0]; ++i) visit(lattice.index(i, j, k), Vec3i(i, j, k));
+}
+
 inline double interpolate(const Grid& g, const Field& field, const Vec3& x) {
     double sum = 0;
     forEachStencilSample(g, field.lattice, x, [&](int i, double w, const Vec3&) { sum += w * field[i]; });

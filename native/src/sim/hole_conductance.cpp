@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <iomanip>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <sstream>
 
 namespace viscoscope::sim {
 
@@ -18,8 +20,8 @@ constexpr double kAirCells = 3;  // between the box's liquid and its walls along
 constexpr double kFluxTolerance = 0.005;  // |Q_free exit / Q − 1| at which the secant iteration stops
 constexpr int kMaxSolves = 4;
 // Gravity is nearly all borne by the plate, so the flow is a small remainder of a large right-hand
-// side. The sample cup's hole at 48³, against 1e-10: 1e-8 left the flux 0.03 % off; 1e-6 left
-// the first solve's 3 % off (1.525 against 1.480 × Dagan's) and at 96³ the secant 8 % short.
+// side, and a looser tolerance left the flux off and the secant short (tests/bench/FINDINGS.md,
+// "The hole's calibration").
 constexpr double kSolveTolerance = 1e-8;
 constexpr double kMaxResistance = 100;
 
@@ -30,6 +32,27 @@ double daganFlux(double pressureDrop, double viscosity, double r, double t) {
 }
 
 }  // namespace
+
+void Simulation::calibrateHoles() {
+    for (size_t i = 0; i < scene_.solids.size(); ++i)
+        if (const auto* cup = std::get_if<CupSolid>(&scene_.solids[i]); cup && cup->holeRadius > 0) {
+            HoleCalibration calibration;
+            try {
+                calibration = calibrateHole(*cup, grid_, scene_.solver);
+            } catch (const InputError&) {  // its box, a few hole radii wide, holds no liquid cell
+                std::ostringstream text;
+                text << std::setprecision(3) << scene_.sourceFile.filename().string() << ": solids[" << i
+                     << "] (cup): its hole (hole_radius " << cup->holeRadius << " m, "
+                     << 2 * cup->holeRadius / grid_.dx << " cells across at resolution " << scene_.domain.resolution
+                     << ") is too small for the grid to calibrate its drain; raise the resolution or hole_radius, "
+                     << "or set hole_radius 0 for a cup without a hole";
+                throw InputError(text.str());
+            }
+            calibration.solid = static_cast<int>(i);
+            setHoleResistance(*cup, calibration.resistance);
+            holeCalibrations_.push_back(calibration);
+        }
+}
 
 void Simulation::setHoleResistance(const CupSolid& cup, double resistance) {
     const double reach = cup.holeRadius + grid_.dx;
@@ -108,7 +131,7 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
     box.material.viscosity = 1;
     box.gravity = Vec3(0, 0, -1);
     box.solver = solver;
-    // One decoupled step is not the steady Stokes flow (at 48³ it passed 16× Dagan's flux), so both
+    // One decoupled step is not the steady Stokes flow (it passed many times Dagan's flux), so both
     // schemes take the drag the unified scheme's steady solve asks for.
     box.solver.scheme = StokesScheme::Unified;
     box.solver.holeConductance = HoleConductance::Grid;
@@ -142,8 +165,8 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
     calibration.solves = 1;
     // A drag can only slow the hole down: faces passing less than the free exit are left as they are.
     if (excess(calibration.gridFlux) < -kFluxTolerance) {
-        // Secant on the excess. The first guess is from the sample cup at 48³ (test 2c's
-        // placements): the resistance that took Q to the free exit's was 1.7–1.8 × −excess.
+        // Secant on the excess. The first guess is the ratio of resistance to −excess measured on
+        // the sample cup (tests/bench/FINDINGS.md, "The hole's calibration").
         double previous = 0.0, previousExcess = excess(calibration.gridFlux);
         double resistance = -1.75 * previousExcess;
         double flux = fluxOverDagan(resistance);

@@ -31,6 +31,34 @@ double MaterialLaw::viscosity(double shearRate) const {
                       material_.model);
 }
 
+double updateViscosity(const MaterialLaw& law, double viscosity, const StokesProblem& problem,
+                       const std::array<Field, 3>& velocity, Field& cellViscosity,
+                       std::array<Field, 3>& edgeViscosity) {
+    const double eta0 = viscosity;
+    if (!law.shearDependent()) {
+        std::fill(cellViscosity.values.begin(), cellViscosity.values.end(), eta0);
+        for (Field& eta : edgeViscosity) std::fill(eta.values.begin(), eta.values.end(), eta0);
+        return 0.0;
+    }
+    const ShearRates rates = shearRates(problem, velocity);
+    double squaredChange = 0, squared = 0;
+    auto apply = [&](Field& eta, const Field& weight, const Field& rate) {
+        for (int s = 0; s < eta.lattice.count(); ++s) {
+            if (weight[s] < kMinWeight) {
+                eta[s] = eta0;
+                continue;
+            }
+            const double updated = law.viscosity(rate[s]);
+            squaredChange += (updated - eta[s]) * (updated - eta[s]);
+            squared += updated * updated;
+            eta[s] = updated;
+        }
+    };
+    apply(cellViscosity, problem.weights->cell, rates.cell);
+    for (int e = 0; e < 3; ++e) apply(edgeViscosity[e], problem.weights->edge[e], rates.edge[e]);
+    return squared > 0 ? std::sqrt(squaredChange / squared) : 0.0;
+}
+
 double apparentViscosity(const Material& material, double shearRate) {
     return MaterialLaw(material).viscosity(shearRate);
 }

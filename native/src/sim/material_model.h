@@ -3,6 +3,9 @@
 #pragma once
 
 #include "scene/scene.h"
+#include "sim/stokes_solver.h"
+
+#include <array>
 
 namespace viscoscope::sim {
 
@@ -16,5 +19,13 @@ public:
 private:
     Material material_;
 };
+
+// Sets the viscosity at every cell and edge of `problem` from `law` at that sample's own shear
+// rate in `velocity`, and returns the RMS change of η over the liquid's samples relative to its
+// RMS, which ends a Picard iteration (0 for a Newtonian law, whose η is `viscosity` everywhere).
+// Samples without liquid keep `viscosity`, which no stress row reads.
+double updateViscosity(const MaterialLaw& law, double viscosity, const StokesProblem& problem,
+                       const std::array<Field, 3>& velocity, Field& cellViscosity,
+                       std::array<Field, 3>& edgeViscosity);
 
 }  // namespace viscoscope::sim

@@ -36,6 +36,7 @@ namespace viscoscope::sim {
 
 class SolidField;
 class MaterialLaw;
+class GridVelocity;
 
 // The material's dynamic viscosity (Pa·s) at shear rate γ̇ = √(2 D:D) (1/s), as the solver's law
 // gives it per stress sample.
@@ -64,7 +65,8 @@ public:
 };
 
 // A share of the liquid lost (out of the domain, or into a solid) that makes a run's result
-// probably wrong: a run conserves its volume to a few percent (the sample cup's drift is -0.3 %).
+// probably wrong: a run conserves its volume to a few percent (tests/bench/FINDINGS.md, "The
+// liquid's particle radius").
 inline constexpr double kLostLiquidShare = 0.2;
 
 // The share of a run's liquid lost since its fullest frame so far, fed one frame at a time.
@@ -114,8 +116,7 @@ Grid sceneGrid(const Scene& scene);
 
 // A cup's hole a few cells across passes more liquid than it should: its faces' open areas give its
 // cross-section, but the grid cannot resolve the velocity's parabola across it, and the flux then
-// depends on where the hole sits among the faces (the sample cup's at 48³, in the calibration's
-// box below: 1.37× Dagan's flux as it sits, 1.69× moved ½ cell sideways). As Peaceman's well
+// depends on where the hole sits among the faces. As Peaceman's well
 // model does for wells narrower than a reservoir grid's cells, the simulation adds a subgrid
 // resistance to the faces in and around the hole, found per grid and placement by solving steady
 // Stokes flow through the same hole on the same lattice: under a layer of liquid 4 hole radii
@@ -124,16 +125,13 @@ Grid sceneGrid(const Scene& scene);
 // Q = ΔP / (η (3/r³ + 8t/(π r⁴))) for a hole of radius r through a plate t thick with liquid on
 // both sides. It is a drag proportional to η, so one calibration holds at every η and ρ. It is a
 // drag rather than a smaller open area because a smaller area speeds the liquid in the hole up by
-// the same factor; where inertia matters (η = 1 Pa·s, seed 3) the sample cup then drained 0.1139 of
-// its liquid by frame 8 at 48³ against 0.1216 at 96³ (−6.3 %).
-// Calibrated to Dagan's flux itself, in a box full of liquid on both sides of the plate, the drag
-// held the drain back once the hole emptied into a jet: at η = 1, 48³ drained 0.1201 by frame 8
-// against 0.1245 at 96³ (−3.6 %), its stream's tip 8.9 mm behind at frame 4; with the free exit's
-// target 0.1294 against 0.1273 (+1.7 %) and 4.7 mm.
+// the same factor, which drains too slowly where inertia matters. Its target is the free exit's
+// flux, not Dagan's itself (a box full of liquid on both sides of the plate), which held the drain
+// back once the hole emptied into a jet.
 //
-// The box's faces converge to this flux as the lattice refines (tests/bench/hole_calibration.py,
-// the means over four placements fitted linearly in Δx): 1.372, 1.329, 1.301 and 1.288 × Dagan
-// at the sample scene's 96³, 128³, 160³ and 192³ give 1.20; with 48³ and 64³ too, 1.24.
+// kFreeJetFluxOverDagan is the flux the box's faces converge to as the lattice refines
+// (tests/bench/hole_calibration.py, the means over four placements fitted linearly in Δx).
+// The figures behind all of this: tests/bench/FINDINGS.md, "The hole's calibration".
 inline constexpr double kFreeJetFluxOverDagan = 1.20;
 struct HoleCalibration {
     int solid = 0;             // the cup's index in Scene::solids
@@ -168,8 +166,8 @@ public:
     double particleVolume() const { return particleVolume_; }  // m³ of liquid each particle carries
     // The pressure at cell c's centre (Pa) as the faces feel it: the solve's unknown scaled by the
     // cell's liquid fraction W (its rows are W ∇·u), plus the Laplace pressure outside the liquid,
-    // W p + (1 − W) σκ. It is the unknown itself in full cells; beside the sample cup's wall
-    // (48³, W ≈ 0.46) the unknown alone reads about twice the hydrostatic pressure.
+    // W p + (1 − W) σκ. It is the unknown itself in full cells; beside a wall the unknown alone reads
+    // far from the hydrostatic pressure (tests/bench/FINDINGS.md, "Pressures in cut cells").
     double cellPressure(int c) const;
     // Trilinear on the staggered grid; beyond the domain's walls, their ghosts (wallGhostRatio).
     Vec3 velocityAt(const Vec3& x) const;
@@ -195,29 +193,18 @@ private:
 
     // The calibration of `cup`'s hole on `grid`'s lattice, cached per hole and lattice placement.
     static HoleCalibration calibrateHole(const CupSolid& cup, const Grid& grid, const SolverSettings& solver);
+    void calibrateHoles();  // every cup with a hole: holeCalibrations_ and its faces' resistance
     void setHoleResistance(const CupSolid& cup, double resistance);
     double downwardFlux(double z) const;
     void seedParticles();
     void emit(double dt);
-    void transferToGrid();
-    void computeFaceOpenings();
-    std::vector<Vec3> wallImages(double reach) const;
     void computeFractions();
-    void extrapolateVelocity(int layers);
-    double velocityComponentAt(int axis, const Vec3& x, Vec3* gradient) const;
-    template <bool kGradient>
-    double interpolateVelocity(int axis, const Vec3& x, Vec3* gradient) const;
-    void applyBodyForces(double dt);
-    void applySurfaceTension(double dt);
+    GridVelocity gridVelocity() const;  // the velocity the particles read
     // The Stokes solve's problem over this step's fractions and viscosities (its divergence target
     // is the step's own).
     StokesProblem stokesProblem(double dt) const;
-    // Sets η at every cell and edge from `velocity`'s shear rates; returns the RMS change of η over
-    // the liquid's samples relative to its RMS (0 for a Newtonian liquid).
-    double updateViscosity(const StokesProblem& problem, const std::array<Field, 3>& velocity);
+    SolveStats solvePressureAndViscosity(double dt, const std::array<Field, 3>& flowBeforeForces);
     void measureShearRate(FrameStats& stats) const;
-    void transferToParticles();
-    void advectParticles(double dt);
 
     Scene scene_;
     Grid grid_;
@@ -233,10 +220,10 @@ private:
     Field laplacePressure_;           // (1 − W) σκ at cells near the surface, this step's
     Field cellViscosity_;
     std::array<Field, 3> edgeViscosity_;
-    std::vector<double> fineSolidFraction_;  // non-solid fraction of each half-cell, fixed in time
+    std::vector<double> halfCellOpen_;  // non-solid fraction of each half-cell, fixed in time
     std::vector<double> cellSolidDistance_;  // solid signed distance at cell centres
     std::vector<HoleCalibration> holeCalibrations_;
-    Vec3i activeLo_{0, 0, 0}, activeHi_{0, 0, 0};  // cells that can hold liquid this step (inclusive)
+    CellBox active_;                  // cells that can hold liquid this step
     double time_ = 0;
     int frame_ = 0;
     double particleVolume_ = 0;

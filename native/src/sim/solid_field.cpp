@@ -19,8 +19,9 @@ double boxDistance(const Vec3& x, const Vec3& lo, const Vec3& hi) {
 }
 
 // Distance to a z-aligned solid cylinder r <= radius, z in [z0, z1], centred at (cx, cy).
-// √(a² + b²) rather than std::hypot, whose care for overflow no scene length needs: the cup's
-// three cylinders made hypot 4.7 % of a 48³ simulation's time at η = 300.
+// √(a² + b²) rather than std::hypot, whose care for overflow no scene length needs and which took a
+// noticeable share of a simulation's time (tests/bench/FINDINGS.md, "Small costs and a
+// scheduling fault").
 double cylinderDistance(const Vec3& x, const Vec3& base, double radius, double z0, double z1) {
     const double r = Eigen::Vector2d(x.x() - base.x(), x.y() - base.y()).norm();
     const double dr = r - radius;

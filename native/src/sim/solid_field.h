@@ -29,4 +29,15 @@ private:
     Grid grid_;
 };
 
+// Whether x is surely at least `clearance` from every solid, from the solids' distance at its cell's
+// centre alone (`cellSolidDistance`, one per cell of `grid`): distances are 1-Lipschitz, so this
+// spares most particles a query of the solids.
+inline bool surelyClearOfSolids(const Grid& grid, const std::vector<double>& cellSolidDistance, const Vec3& x,
+                                double clearance) {
+    const Lattice cells = grid.lattice(kCellCentre);
+    const Vec3i c = ((x - grid.origin) / grid.dx).array().floor().cast<int>();
+    const bool inGrid = (c.array() >= 0).all() && (c.array() < cells.size.array()).all();
+    return inGrid && cellSolidDistance[cells.index(c[0], c[1], c[2])] - grid.dx >= clearance;
+}
+
 }  // namespace viscoscope::sim

@@ -58,14 +58,11 @@ std::vector<Row> constraintRows(const StokesProblem& p, bool pressure, bool stre
     // its velocity is the wall's ghost value (wallGhostRatio), which keeps cut-cell walls
     // consistent with the cut-cell weights. The wall sits where the two faces' signed distances
     // put it by linear interpolation. In a plate under two cells thick a ghost's nearest surface
-    // can be the plate's far face, which puts the wall too far out: a film on a plate 1.2 cells
-    // thick, moved 0 / ¼ / ½ / ¾ cell, ran +0.1 / +9.9 / +5.8 / +0.6 % fast at mid-depth (against
-    // its measured depth), and 36 % fast one cell above the bed at ¼. Placing the wall where the
-    // segment between the two faces enters the solid (regula falsi on the distance) cut the ¼ case
-    // to +1.9 % and 5 % (the ½ case, with the bed on a row of faces, did not change), but changed
-    // the sample cup's drain by frame 8 (η = 1) by +17 % at 64³, +7 % and +9 % at 48³ (as is, moved
-    // ½ cell sideways) and −1 % at 96³, so the grids agreed less; taking the nearer of the two wall
-    // positions gave +16 %, −7 %, −21 % and −8 %. Neither was kept.
+    // can be the plate's far face, which puts the wall too far out, and a film on a thin plate then
+    // runs fast by where the plate sits among the faces. Placing the wall where the segment between
+    // the two faces enters the solid (regula falsi on the distance) mended the film but made the
+    // sample cup's drain agree less across grids, as did taking the nearer of the two wall
+    // positions; neither was kept (tests/bench/FINDINGS.md, "The Stokes solve's walls").
     auto addDifference = [&](Row& row, int axis, const Vec3i& lo, const Vec3i& hi, double k, double slip) {
         const int fLo = faceAt(axis, lo), fHi = faceAt(axis, hi);
         if (fLo >= 0 && fHi >= 0) {
@@ -187,9 +184,9 @@ void multiply(const SparseRows& a, const Vec& x, Vec& y) {
 }
 
 // The deterministic reduce splits the range the same way at any thread count and on every run, so
-// the sums, and the simulation, do not depend on how the work was scheduled. With parallel_reduce
-// two runs of one 48³ simulation of the sample cup differed by 10⁻⁵ m/s after a frame, and after 24
-// one particle had moved 5 cm apart.
+// the sums, and the simulation, do not depend on how the work was scheduled: with parallel_reduce
+// two runs of one simulation drifted apart within a frame (tests/bench/FINDINGS.md, "Small costs and
+// a scheduling fault").
 double dot(const Vec& a, const Vec& b) {
     return tbb::parallel_deterministic_reduce(
         tbb::blocked_range<Eigen::Index>(0, a.size(), 8192), 0.0,
@@ -208,9 +205,9 @@ struct CgResult {
 // Jacobi-preconditioned conjugate gradient on a matrix-free SPD operator, from the guess in x.
 // Written here rather than Eigen::ConjugateGradient because the operator is a product of three
 // factors that is never assembled, and Eigen's matrix-free path needs a wrapper longer than this loop.
-// Jacobi because it won: on the sample cup's time steps (48³ at η 8 and 300, 96³ at 8) incomplete
-// Cholesky and hypre's BoomerAMG took 2–11× fewer iterations but 1.7–8× longer in all
-// (tests/bench/FINDINGS.md, "Preconditioners for the unified solve").
+// Jacobi because it won: on the sample cup's time steps incomplete Cholesky and hypre's BoomerAMG
+// took fewer iterations but longer in all (tests/bench/FINDINGS.md, "Preconditioners for the
+// unified solve").
 CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, const Vec& diagonal,
                            const Vec& b, Vec& x, double tolerance, int maxIterations) {
     CgResult result;
@@ -249,7 +246,8 @@ CgResult conjugateGradient(const std::function<void(const Vec&, Vec&)>& apply, c
 // rows share, to a face only one of them holds (a face onto air). Liquid that fills a sealed region
 // (a closed box, a periodic pipe) cannot: the vector x_c = 1/W_c is then in the system's null space
 // (Hᵀx is the plain divergence summed over the region, whose flux cancels), so a divergence target
-// there is inconsistent and CG diverges; a full periodic pipe lost 99 % of its liquid in a frame.
+// there is inconsistent and CG diverges, and a full periodic pipe lost its liquid (tests/bench/
+// FINDINGS.md, "Figures moved from test comments").
 std::vector<char> rowsThatCanChangeVolume(const std::vector<Row>& rows, const FaceUnknowns& u) {
     std::vector<int> parent(rows.size());
     for (size_t r = 0; r < rows.size(); ++r) parent[r] = static_cast<int>(r);

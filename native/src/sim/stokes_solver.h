@@ -106,11 +106,9 @@ ShearRates shearRates(const StokesProblem& problem, const std::array<Field, 3>& 
 // condition where the wall really is, not at the solid sample. The solve's stress rows use it, and
 // so does the particles' velocity interpolation beyond the domain's boundary.
 // The liquid sample's distance is floored at 0.1 cell, which moves the wall below a closer sample
-// and lets it slip: a block slumping at η = 1 Pa·s on a ground 0.05 / 0.02 cell below the lowest
-// faces' centres spread to an rms radius 3 % / 10 % wider than with the ground 0–0.4 cell below them
-// (tests/bench/ground_offset.py, 48 cells). Flooring both this and the stress rows' distance at 0.01
-// cell kept it within 1.4 %, but a slump at η = 0.05 Pa·s with the ground 0.011 cell below then went
-// non-finite within 5 frames, so the floor stays.
+// and lets it slip (a slump spreads wider on a ground just below the lowest faces' centres); a
+// smaller floor let a thin liquid's step go non-finite, so the floor stays (tests/bench/FINDINGS.md,
+// "The Stokes solve's walls").
 inline double wallGhostRatio(double liquidDistance, double ghostDistance, double slipLength, double dx) {
     const double liquid = std::max(liquidDistance, 0.1 * dx), ghost = std::min(ghostDistance, 0.0);
     return (ghost + slipLength) / (liquid + slipLength);
@@ -121,12 +119,9 @@ inline constexpr double kMinWeight = 1e-3;
 // Velocity masses are clamped to this fraction of a full cell: a face whose control volume is almost
 // empty would otherwise make the eliminated system arbitrarily stiff. The clamp is mass the liquid
 // does not have, on the faces at and beyond the surface that stress rows touch (and in the surface
-// tension's impulse), and it holds thin liquid back where viscosity couples those faces weakly
-// (Δt ν/Δx² ≈ 0.24 at η = 1 Pa·s, 48³). The sample cup's puddle at η = 1 (the 99th percentile of
-// the distance from the axis of the particles below 30 mm, at frame 60) reached 74.8 mm at 48³
-// (seed 3) with a clamp of 5 %, 75.6 at 1 %, 76.1 at 0.2 % and at 0.05 %; 96³ (seed 11) reached
-// 75.9 at 5 % and 75.7 at 0.2 %. The solver's CG iterations over the run grew ×1.5 at 48³ and
-// ×1.4 at 96³.
+// tension's impulse), and it holds thin liquid back where viscosity couples those faces weakly.
+// This clamp lets the sample cup's puddle at 48³ reach as far as smaller ones and as 96³, for
+// somewhat more CG iterations (tests/bench/FINDINGS.md, "The Stokes solve's walls").
 inline constexpr double kMinMassFraction = 0.002;
 
 }  // namespace viscoscope::sim
