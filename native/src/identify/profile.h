@@ -43,10 +43,11 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
 
 // point's θ where all placements' lines reach, the profile holds the mean of their E there. The
 // lines, not a fitted curve, because E is often a V near its minimum (FINDINGS, "The profile
-// interval") and a parabola misplaces its tip. Points of a single placement are returned as they are; without a common span, every
-// placement's points as they are (a run cut short by its time budget after one generation on each
-// placement, their samples apart, would otherwise lose the better half: η = 1 on the sample cup, its
-// first placement's points all below 0.71, the other's lowest E at 1.023).
+// interval") and a parabola misplaces its tip. Points of a single placement are returned as they
+// are; without a common span, every placement's points as they are (a run cut short by its time
+// budget after one generation on each placement, their samples apart, would otherwise lose the
+// better half: η = 1 on the sample cup, its first placement's points all below 0.71, the other's
+// lowest E at 1.023).
 struct PlacedPoint {
     double theta = 0, E = 0, gridShift = 0;
 };
