@@ -2,7 +2,8 @@
 
 Both of Mantaflow's viscosity paths are set (DESIGN.md, "What Mantaflow does"):
 - diffusion: use_diffusion, viscosity_base · 10^-viscosity_exponent = ν (Blender's preset convention);
-- variational: use_viscosity, viscosity_value = ν · 0.4 s / L², L the domain's longest side in metres.
+- variational: use_viscosity, viscosity_value = ν · T / L², T Mantaflow's time unit
+  (units.MANTAFLOW_TIME_UNIT_S), L the domain's longest side in metres.
 The variational value depends on the domain size, so it is recomputed when the domain is resized.
 Mantaflow's viscosity is one constant: a shear-dependent material is applied at the viscosity the
 engine's law gives at the scene's typical shear rate (typical_shear_rate), which the panel shows.

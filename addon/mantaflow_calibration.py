@@ -39,7 +39,7 @@ else:  # run as a script by the background Blender
 EXIT_OK, EXIT_INTERNAL, EXIT_BAD_INPUT, EXIT_CANCELLED = 0, 1, 2, 3
 VISCOSITY_VALUE_MIN, VISCOSITY_VALUE_MAX = 1e-6, 10.0  # RNA range of viscosity_value
 FORMAT = "viscoscope.mantaflow_calibration"
-FLAT_E_SHARE, FLAT_SPAN = 0.05, 2.0  # a plateau of E: within 5 % of the least over a factor 2 of values
+FLAT_E_SHARE, FLAT_SPAN = 0.05, 2.0  # a plateau of E: within FLAT_E_SHARE of the least over FLAT_SPAN
 
 
 class BadInput(Exception):

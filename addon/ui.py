@@ -1,11 +1,13 @@
 """The "Viscoscope" tab of the 3D Viewport sidebar. Panels only lay out properties and operators."""
 
+import json
 import textwrap
 
 import bpy
 
 from . import engine, mantaflow, prefs
 from .operators import fluid as fluid_ops
+from .operators import mantaflow_calibration as calibration
 from .operators import runner
 from .operators.silhouettes import made_with
 from .presets import VISCOSCOPE_PT_fluid_presets
@@ -82,6 +84,31 @@ def draw_job(layout, context, kind, run_op, run_text, resume_op=None):
         draw_message(col, context, st.warning, icon='ERROR')
     if st.error and not active:
         draw_message(col, context, st.error, icon='ERROR', alert=True)
+
+
+def draw_calibration(layout, context):
+    """The Fluid Material panel's calibration: the button, its job, and the result."""
+    vs = context.scene.viscoscope
+    calibrate = calibration.VISCOSCOPE_OT_calibrate_mantaflow
+    draw_job(layout, context, calibration.KIND, calibrate.bl_idname, calibrate.bl_label, resume_op=calibrate.bl_idname)
+    if vs.fluid.model != 'NEWTONIAN':
+        draw_message(layout, context, "Mantaflow has no shear-dependent viscosity: the calibration matches one "
+                                      "constant viscosity to the footage", icon='ERROR')
+    if not vs.mantaflow_calibration:
+        return
+    try:
+        cal = json.loads(vs.mantaflow_calibration)
+    except ValueError:
+        return
+    box = layout.box()
+    draw_message(box, context, "Formula's viscosity_value: %.4g" % cal["formula_value"])
+    draw_message(box, context, "Calibrated: %.4g, %.3g × the formula's (%s, resolution %d)" % (
+        cal["chosen_value"], cal["ratio"], cal["domain"], cal["resolution"]), icon='CHECKMARK')
+    col = box.column(align=True)
+    for value, E in cal["values"]:
+        col.label(text="%.4g: E %.4g" % (value, E), icon='RIGHTARROW' if value == cal["chosen_value"] else 'BLANK1')
+    if cal.get("warning"):
+        draw_message(box, context, cal["warning"].capitalize(), icon='ERROR')
 
 
 REFERENCE_KINDS = {'CLIP': "clip", 'TRACK': "measured track", 'BOTH': "clip and track"}
@@ -354,7 +381,6 @@ class VIEW3D_PT_viscoscope_fluid(_ViscoscopePanel, bpy.types.Panel):
                 text = ("Mantaflow's viscosity is constant: Apply sets η at the domain's typical shear "
                         "rate √(g/L), by the engine's law")
             draw_message(layout, context, text, icon='INFO')
-        from .operators.mantaflow_calibration import draw_calibration
         draw_calibration(layout, context)
 
 

@@ -65,7 +65,7 @@ def diffusion_base_exponent(nu):
 def variational_viscosity_value(nu, longest_side_m):
     """Mantaflow's `viscosity_value` for kinematic ν [m²/s] in a domain whose longest side is L [m].
 
-    ν = viscosity_value · L² / 0.4 s, hence viscosity_value = ν · 0.4 s / L² (domain units).
+    ν = viscosity_value · L² / T, hence viscosity_value = ν · T / L² (domain units), T = MANTAFLOW_TIME_UNIT_S.
     """
     nu = check_finite("kinematic viscosity", nu, minimum=0.0)
     length = check_finite("domain size", longest_side_m, strictly_positive=True)

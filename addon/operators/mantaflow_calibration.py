@@ -141,30 +141,4 @@ class VISCOSCOPE_OT_calibrate_mantaflow(EngineOperator, bpy.types.Operator):
         read_calibration(context, out_dir)
 
 
-def draw_calibration(layout, context):
-    """The Fluid Material panel's calibration: the button, its job, and the result."""
-    from ..ui import draw_job, draw_message
-    vs = context.scene.viscoscope
-    draw_job(layout, context, KIND, VISCOSCOPE_OT_calibrate_mantaflow.bl_idname,
-             VISCOSCOPE_OT_calibrate_mantaflow.bl_label, resume_op=VISCOSCOPE_OT_calibrate_mantaflow.bl_idname)
-    if vs.fluid.model != 'NEWTONIAN':
-        draw_message(layout, context, "Mantaflow has no shear-dependent viscosity: the calibration matches one "
-                                      "constant viscosity to the footage", icon='ERROR')
-    if not vs.mantaflow_calibration:
-        return
-    try:
-        cal = json.loads(vs.mantaflow_calibration)
-    except ValueError:
-        return
-    box = layout.box()
-    draw_message(box, context, "Formula's viscosity_value: %.4g" % cal["formula_value"])
-    draw_message(box, context, "Calibrated: %.4g, %.3g × the formula's (%s, resolution %d)" % (
-        cal["chosen_value"], cal["ratio"], cal["domain"], cal["resolution"]), icon='CHECKMARK')
-    col = box.column(align=True)
-    for value, E in cal["values"]:
-        col.label(text="%.4g: E %.4g" % (value, E), icon='RIGHTARROW' if value == cal["chosen_value"] else 'BLANK1')
-    if cal.get("warning"):
-        draw_message(box, context, cal["warning"].capitalize(), icon='ERROR')
-
-
 classes = (VISCOSCOPE_OT_calibrate_mantaflow,)

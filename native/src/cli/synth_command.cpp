@@ -155,7 +155,7 @@ bool runBlender(const fs::path& blender, const fs::path& script, const fs::path&
 
 // A render at the supersampled size, averaged down to the camera's pixels in linear light, as a
 // sensor's pixel collects it (averaging sRGB values darkens mixed pixels, so a dark liquid on a
-// bright backdrop came out with a fatter outline: 10 % more reference area at η = 100).
+// bright backdrop came out with a fatter outline; FINDINGS, "Figures moved from code comments").
 cv::Mat cameraPicture(const fs::path& file, const PinholeCamera& big, cv::Size size) {
     const cv::Mat image = readImage(file, cv::IMREAD_COLOR);
     if (image.cols != big.width || image.rows != big.height)

@@ -1,19 +1,12 @@
-// The alignment check. The grid resolves a scene's small features unevenly: the sample cup's hole
-// is 2.4 cells in radius at 48³, and where the faces fall against its rim decides how much of it passes
-// flux (84–98 % of its area as the cup moved sideways by 0 to ½ cell) and so the drain (share out
-// by frame 8 at η = 1: 0.133 to 0.154; 0.126–0.133 moved upwards). That error is the
-// discretization's, not the fit's, and the profile band does not see it. So θ* and kAlignmentStep·θ*
-// are scored again on the grid moved by half a cell along x and y, and with the profile's curvature
-// c the minimum there is u_s = ((u₁² − u₂²) − (E₁ − E₂)/c) / (2 (u₁ − u₂)). Against the 64³ η = 1
-// reference, E of the 48³ grid over η = 0.85 … 1.3 has its minimum near 0.86 aligned and 1.06
-// shifted. With that landscape's curvature the two points gave 1.05–1.14; in the identification
-// the profile of CMA-ES's spread-out samples was flatter (c = 1.04 against 1.8; E is more V than
-// parabola there) and gave 1.27, so the widening errs wide. Against η = 10 it gave 9.72 for θ* =
-// 9.04 (the landscape's shifted minimum is about 10.0). One other alignment is a sample of the
-// error, not its sign: the interval is widened to θ*·exp(±|ln(θ_s/θ*)|). Against 96³ references
-// (identify_landscape_bench at 18e9051), the minima on grids moved by 0, ¼ and ½ cell were
-// 0.864 / 0.933 / 1.054 at η = 1, 8.88 / 9.04 / 9.41 at η = 10, 104 / 114 / 128 at η = 100 and
-// 314 / 341 / 381 at η = 300; from θ* the check's two points said 9.95, 134 and 399 for the last three.
+// The alignment check. The grid resolves a scene's small features unevenly: where the faces fall
+// against the rim of a hole a few cells wide decides how much of it passes flux, and so the drain.
+// That error is the discretization's, not the fit's, and the profile band does not see it. So θ*
+// and kAlignmentStep·θ* are scored again on the grid moved by half a cell along x and y, and with
+// the profile's curvature c the minimum there is u_s = ((u₁² − u₂²) − (E₁ − E₂)/c) / (2 (u₁ − u₂)).
+// The profile of CMA-ES's spread-out samples is flatter than the landscape (E is more V than
+// parabola near its minimum), so the widening errs wide. One other alignment is a sample of the
+// error, not its sign: the interval is widened to θ*·exp(±|ln(θ_s/θ*)|). The sample cup's figures
+// are in tests/bench/FINDINGS.md, "Figures moved from code comments".
 #include "identify/search_state.h"
 
 namespace viscoscope::identify {
@@ -55,8 +48,8 @@ AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Obse
         return outcome;
     }
     if (!cached && !budget.fits(budget.alignmentSeconds())) {
-        // The minimum full-fidelity generations may have spent the budget (η = 300 on the sample
-        // cup: 555 s of 600, and the check took 76 s more).
+        // The minimum full-fidelity generations may have spent the budget (FINDINGS, "Figures moved
+        // from code comments").
         outcome.warning = "alignment_check: skipped, its two evaluations (about " +
                           wholeSeconds(budget.alignmentSeconds()) + " s) do not fit time_budget_s (" +
                           wholeSeconds(job.timeBudget) + " s); the interval leaves out the grid's share of the error";

@@ -1,9 +1,9 @@
 // OUT/fields: θ*'s hidden fields, kept from the best evaluation's own run.
 //
-// Simulating θ* again for them took 26–97 s of a 10-minute identification on the sample scene at
-// 48³ (η = 10…300); writing them costs each full-fidelity evaluation its .vdb writes (0.6 s of a
-// 65 s evaluation at η = 3, 61 frames), and the level sets of frames it does not compare (longer
-// clips, compared every few frames). θ* is simulated (and scored) again only when they are missing:
+// Simulating θ* again for them costs a whole evaluation at the end; writing them costs each
+// full-fidelity evaluation only its .vdb writes and the level sets of frames it does not compare
+// (longer clips, compared every few frames) (tests/bench/FINDINGS.md, "Figures moved from code
+// comments"). θ* is simulated (and scored) again only when they are missing:
 // a run killed while promote swaps them, or one whose best evaluation ran without writing them. A
 // kill -9 mid-generation leaves OUT/fields.partial until the next generation of the run.
 #include "identify/search_state.h"

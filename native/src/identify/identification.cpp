@@ -1,18 +1,17 @@
 // The identification loop: CMA-ES in log-parameter space, the population simulated in parallel
 // (TBB), two fidelities, a checkpoint after every generation, resume, stopping rules and results.
 //
-// Fidelity policy (measured in tests/bench/identify_bench.cpp):
+// Fidelity policy (measured with tests/bench/identify_bench.cpp; the figures in
+// tests/bench/FINDINGS.md, "Figures moved from code comments" and "The profile interval"):
 //   * generations [0, G_c) simulate on the grid r_c = max(8, round(coarse_factor · r)) and only the
 //     first coarse_time_share of the compared clip (at least up to the third reference frame that
 //     shows liquid: see firstPartOf), G_c = fidelity.coarse_generations, by default
 //     min(⌊max_generations / 2⌋, 10), and always ≤ max_generations − 1 so at least one generation
 //     runs at full fidelity (the job's resolution r, every compared frame);
 //   * by default the coarse phase keeps the job's grid and shortens the clip to its first third.
-//     A coarser grid is biased: on the sample scene the cup drained 1.5× too fast at 32³ (1.16×
-//     since faces pass flux through their open area only; see kCoarseToFineShift), so its optimum
-//     sat 25–35 % above the truth, while the first 20 of 60 frames at 48³ put the minimum at the
-//     truth (E 0.031 at 9 and 0.032 at 10 Pa·s, truth 10) for about the cost of all 60 frames at
-//     32³ (17 s against 14 s per evaluation, two at once);
+//     A coarser grid is biased: the cup's hole a few cells wide drains too fast, so its optimum
+//     sits above the truth (see kCoarseToFineShift), while the first third of the frames on the
+//     job's grid put the minimum at the truth for about the cost of all frames on the coarser grid;
 //   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
 //     (the coarse optimum differs from the full-fidelity one by more than that, so more coarse
 //     generations are wasted),
@@ -21,16 +20,15 @@
 //   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
 //     kCoarseToFineShift in every coordinate (counters and random stream go on), the first full
 //     generation scores that point too, and the best-so-far is reset: E values of different
-//     fidelities are not comparable. In one dimension with
-//     λ = 4, CMA-ES needs more generations to shrink σ than a 10-minute run has (at 32³ σ went
-//     0.8 → 1.0 → 0.55 in 10 generations), so the coarse phase locates the basin and the fine one
+//     fidelities are not comparable. In one dimension with λ = 4, CMA-ES needs more generations
+//     to shrink σ than a 10-minute run has, so the coarse phase locates the basin and the fine one
 //     searches it, starting from the coarse best rather than from a mean that lags behind;
 //   * in one dimension the first coarse generation scans instead of sampling: its λ points lie evenly
 //     over the initial distribution's ±2σ₀ in log space (within the bounds), and CMA-ES restarts at
 //     the best of them with half their spacing as spread. Sampled, the four points of one draw can
-//     all miss a far optimum, and σ grows too slowly to make up for it within a budget: from the
-//     table's common start (17.3 Pa·s, spread ln 4) the 300 Pa·s reference's search was still
-//     climbing at 111 when its 600 s ran out. A caller's start curve is scanned the same way, in any
+//     all miss a far optimum, and σ grows too slowly to make up for it within a budget (the
+//     300 Pa·s reference's search from the table's common start ran out of time far below it).
+//     A caller's start curve is scanned the same way, in any
 //     dimension, with the restart's spread along the curve (restartAlongScan);
 //   * in one dimension each later full-fidelity generation scores, in place of a sample, the
 //     vertex of the parabola through the best full-fidelity evaluation and its neighbours (see
@@ -39,13 +37,10 @@
 //
 // θ*: the best full-fidelity evaluation. A parabola fitted to E (against 1/η; see fitProfile) over
 // the evaluations near it gives the interval; its vertex is reported (profile_fit.theta_min) but not
-// used as θ*. E(θ) carries a jitter of its own (a drop that pinches off one frame earlier), of ~10 %
-// of E between neighbouring η, which the vertex would average out, but E is not a parabola: against
-// a Blender-rendered 64³ reference at η = 10 it is flat from 7.5 to 10.3 and then jumps (0.18 → 0.27
-// by 10.8), and the vertex fell at 8.2–8.9 in all four 48³ runs (10.8–17.7 % off) where the best
-// evaluation was 0.8–8.1 % off. The vertex did better only on the small CI problems and an
-// exact-rasterized reference (1.9 against 2.3 %, 2.1 against 8 %), and worse on another (2.8 against
-// 0.5 %).
+// used as θ*. E(θ) carries a jitter of its own (a drop that pinches off one frame earlier) between
+// neighbouring η, which the vertex would average out, but E is not a parabola: it is flat and then
+// jumps, and on Blender-rendered references the vertex fell further from the truth than the best
+// evaluation (tests/bench/FINDINGS.md, "The profile interval").
 //
 // With the grid placements taken by generation (the default), full-fidelity generations alternate
 // between grids moved k/n cell sideways, each generation on one so that its candidates rank
@@ -79,7 +74,7 @@ const char* toString(StopReason reason) {
 
 namespace {
 
-// Closer than this in ln θ (0.3 %), a parabolic proposal repeats an evaluation (see parabolicProposal).
+// Closer than this in ln θ, a parabolic proposal repeats an evaluation (see parabolicProposal).
 constexpr double kProposalSpacing = 3e-3;
 
 int coarseResolution(const Job& job) {
@@ -244,8 +239,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // through the best full-fidelity evaluation and its nearest neighbours (bracketedVertex), in
     // place of their last sample; not when an evaluation lies within kProposalSpacing of it, since
     // the same θ scores the same E. With λ = 4 and a spread of ln 1.4, CMA-ES's samples mostly land
-    // away from the optimum it brackets: on the η = 30 row, 5 of 16 full evaluations fell within
-    // ±7 % and the best was 31.45 (4.8 %); with the proposals, 30.36 (1.2 %), itself a proposal.
+    // away from the optimum it brackets (tests/bench/FINDINGS.md, "Figures moved from code comments").
     auto parabolicProposal = [&]() -> std::optional<Eigen::VectorXd> {
         const std::vector<std::pair<double, double>> points = fullFidelityProfile(job, state.evaluated);
         const std::optional<double> vertex = bracketedVertex(points, job.parameters[0].profileInInverse());
@@ -368,7 +362,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             GenerationRecord& last = state.generations.back();
             last.predictedFineGenerationSeconds = budget.fineGenerationSeconds();  // to check it later
             // The minimum full-fidelity generations run whatever the budget says; when they cannot
-            // fit (η = 300 on a 180-frame clip: 2 × 339 s predicted with 440 s left), say so now
+            // fit (a long clip at high η), say so now
             // and how long the run will take, instead of a remaining time that runs out early.
             const double fineMinimum = job.fidelity.minFineGenerations * budget.fineGenerationSeconds();
             const double elapsed = budget.elapsed();
@@ -423,79 +417,33 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     }
 
     // ---- Results.
+    std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
+    if (!best) best = bestAt(job, state.evaluated, Fidelity::Coarse);
+    if (!best) throw std::runtime_error("no successful evaluation");
+    std::vector<ParameterEstimate> estimates;
+    for (int i = 0; i < n; ++i) {
+        ParameterEstimate estimate = estimateParameter(job, bounds, es, state.evaluated, i, best->theta[i]);
+        if (alignmentPlanned) {
+            estimate.alignment =
+                alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, budget, save);
+            if (const std::optional<std::string>& warning = estimate.alignment->warning) {
+                warnings.push_back(*warning);
+                warn(*warning);
+            }
+        }
+        settleInterval(estimate, bounds, i);
+        estimates.push_back(std::move(estimate));
+    }
     IdentificationResult result;
     result.stop = *state.stop;
     result.generations = es.generation();
     result.evaluations = es.evaluations();
     result.resumedFromGeneration = state.resumedFrom;
-    std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
-    if (!best) best = bestAt(job, state.evaluated, Fidelity::Coarse);
-    if (!best) throw std::runtime_error("no successful evaluation");
     result.theta = best->theta;
     result.E = best->E;
-    const Eigen::VectorXd sd = es.standardDeviations();
-    json params = json::object();
-    double alignmentCheckSeconds = 0;
-    for (int i = 0; i < n; ++i) {
-        const double bestTheta = result.theta[i];
-        const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
-        // The final search distribution: exp(m ± 2σ√C_ii) (a 95 % band of CMA-ES's sampling law in log
-        // space, the spread it still considers plausible; not a statistical confidence interval).
-        const std::array<double, 2> cma{std::clamp(std::exp(es.mean()[i] - 2 * sd[i]), lower, upper),
-                                        std::clamp(std::exp(es.mean()[i] + 2 * sd[i]), lower, upper)};
-        json entry{{"unit", job.parameters[i].parameter.declaration->unit},
-                   {"best_evaluation", bestTheta},
-                   {"cma_mean", std::exp(es.mean()[i])},
-                   {"cma_interval", cma},
-                   {"log_std", sd[i]}};
-        std::optional<ProfileFit> profile;
-        if (n == 1) {
-            json info;
-            profile = fitProfile(fullFidelityProfile(job, state.evaluated), bestTheta, 0.5,
-                                 job.parameters[i].profileInInverse(), info);
-            // A vertex beyond the fitted points is an extrapolation, and so is its band (measured: a
-            // vertex at 5.1 over points up to 2.87 gave [2.82, 7.7] for a truth of 3).
-            if (profile && !profile->vertexAmongPoints) profile.reset();
-            entry["profile_fit"] = info;
-            if (profile) entry["profile_interval"] = {profile->interval[0], std::min(profile->interval[1], upper)};
-        }
-        entry["value"] = bestTheta;
-        // The reported interval: the profile band when the fit is convex with its vertex among the
-        // points, else the CMA band; always widened to contain θ*, and by the alignment check.
-        std::array<double, 2> band = profile ? profile->interval : cma;
-        std::optional<double> alignmentSpread;  // |ln(θ_s/θ*)|
-        if (alignmentPlanned) {
-            const AlignmentOutcome check =
-                alignmentCheck(job, pool, observations, state, profile, bestTheta, budget, save);
-            entry["alignment_check"] = check.entry;
-            alignmentSpread = check.spread;
-            alignmentCheckSeconds += check.seconds;
-            if (check.warning) {
-                warnings.push_back(*check.warning);
-                warn(*check.warning);
-            }
-        }
-        if (alignmentSpread) {
-            band[0] = std::min(band[0], bestTheta * std::exp(-*alignmentSpread));
-            band[1] = std::max(band[1], bestTheta * std::exp(*alignmentSpread));
-        }
-        band[0] = std::max(std::min(band[0], bestTheta), lower);
-        band[1] = std::min(std::max(band[1], bestTheta), upper);
-        entry["interval"] = band;
-        std::string method = profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
-                                       "over full-fidelity evaluations within ±0.5 in ln θ of the best "
-                                       "one, band where it is within ΔE = max(2·jitter, 1 % E_min) "
-                                       "of its minimum"
-                                     : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
-        if (alignmentSpread)
-            method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
-                      "and y by half a cell, or half the spacing of the grid placements (alignment_check)";
-        entry["interval_method"] = method;
-        result.interval.push_back(band);
-        if (i == 0) result.intervalMethod = std::string(profile ? "profile" : "cma") + (alignmentSpread ? "+alignment" : "");
-        params[job.parameters[i].name()] = entry;
-    }
-    const double elapsed = budget.elapsed();
+    for (const ParameterEstimate& estimate : estimates) result.interval.push_back(estimate.interval);
+    result.intervalMethod = intervalMethodName(estimates.front());
+    result.seconds = budget.elapsed();
 
     for (const GenerationRecord& g : state.generations)
         if (!g.warning.empty()) warnings.push_back(g.warning);
@@ -504,64 +452,10 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         doubts.push_back(line);
     }
     warnings.insert(warnings.end(), doubts.begin(), doubts.end());
-    json fixedParameters = json::object();
-    for (const FixedParameter& f : job.fixed)
-        fixedParameters[f.parameter.name] = {
-            {"value", f.value}, {"uncertainty", f.uncertainty}, {"unit", f.parameter.declaration->unit}};
-    json evaluated = json::array(), history = json::array();
-    for (const EvaluationRecord& e : state.evaluated) evaluated.push_back(toJson(e));
-    for (const GenerationRecord& g : state.generations) history.push_back(toJson(g));
-    const std::string coarseEnd = std::to_string(state.coarseEnd);
-    json doc{{"format", "viscoscope.identify_result"},
-             {"version", 1},
-             {"job", job.file.string()},
-             {"parameters", params},
-             {"fixed", fixedParameters},
-             {"E", result.E},
-             {"stop", toString(result.stop)},
-             {"generations", result.generations},
-             {"evaluations", result.evaluations},
-             {"population", es.lambda()},
-             {"resolution", plan.fullResolution},
-             {"frames", plan.fullFrames},
-             {"grid_placements", job.gridPlacements},
-             {"coarse_resolution", plan.coarseResolution},
-             {"coarse_frames", plan.coarseFrames},
-             {"coarse_generations", state.coarseEnd},
-             {"fidelity_policy", "generations 1.." + coarseEnd + " at resolution " +
-                                     std::to_string(plan.coarseResolution) + " over simulation frames 0.." +
-                                     std::to_string(plan.coarseFrames) + ", the rest at " +
-                                     std::to_string(plan.fullResolution) + " over 0.." +
-                                     std::to_string(plan.fullFrames) +
-                                     (byGeneration ? "; full-fidelity generations on the " +
-                                                         std::to_string(job.gridPlacements) +
-                                                         " grid placements in turn, θ* the minimum of E's mean over them"
-                                                   : std::string("; θ* is the best full-fidelity evaluation"))},
-             {"resumed_from_generation", state.resumedFrom},
-             {"reference_informative_frames", informativeFrames},
-             {"ground_band_m", job.groundBand},
-             {"warnings", warnings},
-             {"doubts", doubts},
-             {"compared_pixels",
-              {{"left_out_never_visible", obs.neverVisiblePixels},
-               {"left_out_liquid_in_background", obs.inBackgroundPixels},
-               {"reference_liquid_out_of_view_share", obs.referenceOutOfView}}},
-             {"history", history},
-             {"evaluated", evaluated},
-             {"timings", timingsOf(state.evaluated, elapsed, alignmentCheckSeconds)}};
-    if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
-    // With several runs, how well θ* fits each: its evaluation's E per run, on the placement its
-    // fields come from.
-    for (const EvaluationRecord& e : state.evaluated)
-        if (!e.evaluation.runE.empty() && e.theta() == best->theta && e.gridShift == best->gridShift) {
-            doc["run_E"] = e.evaluation.runE;
-            break;
-        }
-    if (writeFields) doc["fields"] = fields.keep(job, obs, *best, plan.fullResolution);
+    result.document = resultDocument(job, result, state, plan, obs, estimates, *best, warnings, doubts);
+    if (writeFields) result.document["fields"] = fields.keep(job, obs, *best, plan.fullResolution);
     writeEvaluationsCsv(job, state.evaluated, outDir / "evaluations.csv");
-    result.seconds = elapsed;
-    result.document = doc;
-    writeJsonAtomically(doc, outDir / "result.json");
+    writeJsonAtomically(result.document, outDir / "result.json");
     return result;
 }
 }  // namespace viscoscope::identify

@@ -47,9 +47,8 @@ struct FidelitySchedule {
     double coarseFactor = 1;
     double coarseTimeShare = 1.0 / 3;
     int coarseGenerations = -1;  // −1 = ⌊maxGenerations / 2⌋ capped at 10; 0 = no coarse phase
-    // Two fit a 10-minute budget on the sample scene at 48³: a full-fidelity generation took 120–135 s
-    // at η = 10 and 200–230 s at η = 3, and in three such runs the best evaluation after two of them
-    // was the final one or within 1.5 % of it.
+    // Two fit a 10-minute budget on the sample scene at 48³, and the best evaluation after two of
+    // them was close to the final one (tests/bench/FINDINGS.md, "Figures moved from code comments").
     int minFineGenerations = 2;
 };
 
@@ -104,11 +103,9 @@ struct Job {
     bool hasSilhouettes() const { return !referenceDir.empty() || video.has_value(); }
     // Without a track CSV, the reference silhouettes' area over time (in the compared region) is the
     // track, with this weight (0 = off). Silhouette E is rough in θ: from about a sixth of the clip
-    // on, η 2 % apart can send the stream and puddle along other paths (η = 30 against a 64³
-    // reference at 48³: E 0.174 at 20.4, 0.204 at 20.0, 0.185–0.20 at 24–30), and the best of a few
-    // evaluations landed 32 % off. The area term, which follows the drained volume, is smooth there
-    // (0.13 / 0.055 / 0.053 / 0.065 / 0.096 at 20 / 24 / 28 / 30 / 33). Its minimum sat about 10 % low
-    // (also at η = 10: 8.95) while extraction kept the grazed outline pixels (fixed by edge_coverage).
+    // on, nearby η can send the stream and puddle along other paths, and the best of a few
+    // evaluations can land far off. The area term, which follows the drained volume, is smooth there
+    // (tests/bench/FINDINGS.md, "Figures moved from code comments").
     double areaTrackWeight = 1;
     // Image rows this high (m) above the ground at the outlet are left out of E (see excludeGroundBand):
     // the job's "ground_band", by default kDefaultGroundBandShare of the outlet's height; 0 = compare
@@ -122,26 +119,24 @@ struct Job {
     int maxGenerations = 80;
     std::uint64_t seed = 1;
     int populationSize = 0;  // 0 = CMA-ES default
-    double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (≈ 0.1 % in θ)
+    double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (a relative step of toleranceX in θ)
     double toleranceFun = 1e-9; // ... or when best E over the last 10 fine generations changes < this
-    // Wall seconds for the whole identification (0 = none). The coarse phase ends by 35 % of it
-    // (kCoarseBudgetShare), and after the minimum fine generations no generation starts that is
+    // Wall seconds for the whole identification (0 = none). The coarse phase ends by kCoarseBudgetShare
+    // of it, and after the minimum fine generations no generation starts that is
     // predicted to end past it (from the mean time of the fine generations so far, with a margin).
     // With a budget the result depends on the machine's speed.
     double timeBudget = 0;
     int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
     // Mesh + fill ("exact", the default) or the band splat ("fast"). The splat fills every pixel a
     // band voxel projects into, so it draws the liquid wider: on the sample cup's references it put
-    // a run of the reference's own simulation 2.8 px per row wider than the exact fill, and the
-    // η = 100 identification at +10 % (exact: +0.3 %). Both cost the same in identify; building
-    // the level set dominates.
+    // a run of the reference's own simulation wider than the exact fill, and the identification
+    // off by more (tests/bench/FINDINGS.md, "Figures moved from code comments"). Both cost the same in identify;
+    // building the level set dominates.
     bool exactSilhouettes = true;
     SilhouetteComparison silhouetteComparison = kDefaultSilhouetteComparison;
     // After the search, θ* is scored again on the grid moved by half a cell along x and y, which
     // moves the simulation's discretization against the scene and nothing else, and the interval
     // is widened by how far that moves the minimum (see alignment_check.cpp).
-    // On the sample cup at 48³ the half-cell shift alone moved the best η against the 64³ η = 1
-    // reference from 0.86 to about 1.06, and against η = 10 from about 9.3 to 10.0.
     bool alignmentCheck = true;
     // E is scored on this many placements of the grid, moved by k/n cells along x and y
     // (k = 0 … n − 1). Where a small feature sits against the faces then matters less: on the
@@ -152,10 +147,9 @@ struct Job {
     // ByGeneration (the default): each full-fidelity generation runs on one placement, in turn (the
     // coarse ones on the job's grid), at no extra cost, and θ* is the lowest point of E's mean over
     // them (placementMeanProfile). EachEvaluation: every evaluation runs on all of them, at n times
-    // the cost, and E is their mean. On Table 1 of the sample cup (600 s budget), 2 by generation
-    // gave ε_η 3.7 / 0.8 / 1.2 / 2.5 / 1.7 / 5.0 % at η = 1 … 300, one placement 3.7 / 0.8 / 0.5 /
-    // 0.8 / 5.2 / 5.5 %, and 2 on each evaluation 11.7 / 4.5 / 1.3 / 1.4 / 1.3 / 1.3 % (half as
-    // many evaluations, too few at η = 1 and 3). Only EachEvaluation with several parameters.
+    // the cost, and E is their mean; within a time budget that leaves half as many evaluations, too
+    // few at low η (tests/bench/FINDINGS.md, "Figures moved from code comments"). Only EachEvaluation with several
+    // parameters.
     PlacementSchedule placementSchedule = PlacementSchedule::ByGeneration;
     ForwardModel forwardModel = ForwardModel::Simulation;
     FidelitySchedule fidelity;

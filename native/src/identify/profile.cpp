@@ -36,7 +36,7 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     const double squaredResiduals = (A * coef - y).squaredNorm();
     const double rSquared = 1 - squaredResiduals / (y.array() - y.mean()).square().sum();
     // E's jitter: the residuals' spread over the n − 3 degrees of freedom the fit leaves. Their RMS
-    // over n reads it √((n − 3)/n) low, 0.63× with the five points a short run often has.
+    // over n reads it √((n − 3)/n) low, √(2/5) with the five points a short run often has.
     const double jitter = std::sqrt(squaredResiduals / (near.size() - 3));
     info["coefficients"] = {coef[0], coef[1], coef[2]};
     info["jitter"] = jitter;

@@ -17,9 +17,9 @@ namespace viscoscope::identify {
 // For viscosity u = 1/θ: a creeping flow moves at speeds ∝ 1/η, so a frame at time t looks like
 // the truth's at t·η_true/η and E grows about evenly in 1/η − 1/η_true on both sides, while in ln θ
 // its valley is steeper below the truth than above, and a parabola there puts the vertex high
-// (measured: +2.3 % and +10.1 % against +1.9 % and +3.4 % in 1/η, on a 48³ and a 20³ run). For other
-// parameters u = ln θ. The interval is where the parabola stays within ΔE of its minimum, ΔE =
-// 2 × the jitter in E (the residuals' standard deviation, √(Σr²/(n − 3))), at least 1 % of E_min.
+// (tests/bench/FINDINGS.md, "The profile interval"). For other parameters u = ln θ. The interval is
+// where the parabola stays within ΔE of its minimum, ΔE = 2 × the jitter in E (the residuals'
+// standard deviation, √(Σr²/(n − 3))), at least E_min/100.
 struct ProfileFit {
     double vertex = 0;                 // θ at the parabola's minimum
     std::array<double, 2> interval{};  // θ
@@ -42,12 +42,12 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
 // "theta", "E", "seconds", "frame_s"). 0 without coarse evaluations.
 
 // point's θ where all placements' lines reach, the profile holds the mean of their E there. The
-// lines, not a fitted curve, because E is often a V near its minimum (on the sample cup at η = 10 it
-// was 0.034 at the truth and 0.045–0.058 at ±10 % on both placements) and a parabola misplaces its
-// tip. Points of a single placement are returned as they are; without a common span, every
-// placement's points as they are (a run cut short by its time budget after one generation on each
-// placement, their samples apart, would otherwise lose the better half: η = 1 on the sample cup, its
-// first placement's points all below 0.71, the other's lowest E at 1.023).
+// lines, not a fitted curve, because E is often a V near its minimum (FINDINGS, "The profile
+// interval") and a parabola misplaces its tip. Points of a single placement are returned as they
+// are; without a common span, every placement's points as they are (a run cut short by its time
+// budget after one generation on each placement, their samples apart, would otherwise lose the
+// better half: η = 1 on the sample cup, its first placement's points all below 0.71, the other's
+// lowest E at 1.023).
 struct PlacedPoint {
     double theta = 0, E = 0, gridShift = 0;
 };

@@ -1,4 +1,5 @@
-// What the identification reports beside θ*: doubts, timings and every evaluation as CSV.
+// What the identification reports: θ* and its intervals, doubts, timings, result.json and every
+// evaluation as CSV.
 #include "identify/search_state.h"
 
 #include "sim/sim.h"
@@ -115,6 +116,147 @@ json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSecond
             {"evaluation_cpu_s", evaluationSeconds},
             {"per_fidelity", fidelities},
             {"alignment_check_s", alignmentSeconds}};
+}
+
+ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
+                                    const std::vector<EvaluationRecord>& evaluated, int i, double value) {
+    const Eigen::VectorXd sd = es.standardDeviations();
+    const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
+    ParameterEstimate estimate;
+    estimate.value = value;
+    estimate.cmaMean = std::exp(es.mean()[i]);
+    estimate.logStd = sd[i];
+    // The final search distribution: exp(m ± 2σ√C_ii), two standard deviations of CMA-ES's sampling
+    // law in log space, the spread it still considers plausible; not a statistical confidence interval.
+    estimate.cma = {std::clamp(std::exp(es.mean()[i] - 2 * sd[i]), lower, upper),
+                    std::clamp(std::exp(es.mean()[i] + 2 * sd[i]), lower, upper)};
+    if (job.parameters.size() == 1) {
+        json info;
+        estimate.profile = fitProfile(fullFidelityProfile(job, evaluated), value, 0.5,
+                                      job.parameters[i].profileInInverse(), info);
+        // A vertex beyond the fitted points is an extrapolation, and so is its band
+        // (tests/bench/FINDINGS.md, "The profile interval").
+        if (estimate.profile && !estimate.profile->vertexAmongPoints) estimate.profile.reset();
+        estimate.profileFit = info;
+    }
+    return estimate;
+}
+
+void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i) {
+    const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
+    const double value = estimate.value;
+    std::array<double, 2> band = estimate.profile ? estimate.profile->interval : estimate.cma;
+    if (estimate.widenedByAlignment()) {
+        const double spread = *estimate.alignment->spread;  // |ln(θ_s/θ*)|
+        band[0] = std::min(band[0], value * std::exp(-spread));
+        band[1] = std::max(band[1], value * std::exp(spread));
+    }
+    band[0] = std::max(std::min(band[0], value), lower);
+    band[1] = std::min(std::max(band[1], value), upper);
+    estimate.interval = band;
+}
+
+std::string intervalMethodName(const ParameterEstimate& estimate) {
+    return std::string(estimate.profile ? "profile" : "cma") + (estimate.widenedByAlignment() ? "+alignment" : "");
+}
+
+namespace {
+
+// A parameter's entry in result.json's "parameters".
+json parameterEntry(const Job& job, const LogSearchSpace& bounds, const ParameterEstimate& estimate, int i) {
+    const double upper = std::exp(bounds.upper[i]);
+    json entry{{"unit", job.parameters[i].parameter.declaration->unit},
+               {"best_evaluation", estimate.value},
+               {"cma_mean", estimate.cmaMean},
+               {"cma_interval", estimate.cma},
+               {"log_std", estimate.logStd}};
+    if (estimate.profileFit) {
+        entry["profile_fit"] = *estimate.profileFit;
+        if (estimate.profile)
+            entry["profile_interval"] = {estimate.profile->interval[0], std::min(estimate.profile->interval[1], upper)};
+    }
+    entry["value"] = estimate.value;
+    if (estimate.alignment) entry["alignment_check"] = estimate.alignment->entry;
+    entry["interval"] = estimate.interval;
+    std::string method = estimate.profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
+                                            "over full-fidelity evaluations within ±0.5 in ln θ of the best "
+                                            "one, band where it is within ΔE = max(2·jitter, 1 % E_min) "
+                                            "of its minimum"
+                                          : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
+    if (estimate.widenedByAlignment())
+        method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
+                  "and y by half a cell, or half the spacing of the grid placements (alignment_check)";
+    entry["interval_method"] = method;
+    return entry;
+}
+
+}  // namespace
+
+json resultDocument(const Job& job, const IdentificationResult& result, const SearchState& state,
+                    const FidelityPlan& plan, const Observation& obs, const std::vector<ParameterEstimate>& estimates,
+                    const BestPoint& best, const std::vector<std::string>& warnings,
+                    const std::vector<std::string>& doubts) {
+    const LogSearchSpace bounds = logSearchSpace(job);
+    json params = json::object();
+    double alignmentCheckSeconds = 0;
+    for (size_t i = 0; i < estimates.size(); ++i) {
+        params[job.parameters[i].name()] = parameterEntry(job, bounds, estimates[i], static_cast<int>(i));
+        if (estimates[i].alignment) alignmentCheckSeconds += estimates[i].alignment->seconds;
+    }
+    json fixedParameters = json::object();
+    for (const FixedParameter& f : job.fixed)
+        fixedParameters[f.parameter.name] = {
+            {"value", f.value}, {"uncertainty", f.uncertainty}, {"unit", f.parameter.declaration->unit}};
+    json evaluated = json::array(), history = json::array();
+    for (const EvaluationRecord& e : state.evaluated) evaluated.push_back(toJson(e));
+    for (const GenerationRecord& g : state.generations) history.push_back(toJson(g));
+    const std::string coarseEnd = std::to_string(state.coarseEnd);
+    json doc{{"format", "viscoscope.identify_result"},
+             {"version", 1},
+             {"job", job.file.string()},
+             {"parameters", params},
+             {"fixed", fixedParameters},
+             {"E", result.E},
+             {"stop", toString(result.stop)},
+             {"generations", result.generations},
+             {"evaluations", result.evaluations},
+             {"population", state.es.lambda()},
+             {"resolution", plan.fullResolution},
+             {"frames", plan.fullFrames},
+             {"grid_placements", job.gridPlacements},
+             {"coarse_resolution", plan.coarseResolution},
+             {"coarse_frames", plan.coarseFrames},
+             {"coarse_generations", state.coarseEnd},
+             {"fidelity_policy", "generations 1.." + coarseEnd + " at resolution " +
+                                     std::to_string(plan.coarseResolution) + " over simulation frames 0.." +
+                                     std::to_string(plan.coarseFrames) + ", the rest at " +
+                                     std::to_string(plan.fullResolution) + " over 0.." +
+                                     std::to_string(plan.fullFrames) +
+                                     (placementsByGeneration(job)
+                                          ? "; full-fidelity generations on the " + std::to_string(job.gridPlacements) +
+                                                " grid placements in turn, θ* the minimum of E's mean over them"
+                                          : std::string("; θ* is the best full-fidelity evaluation"))},
+             {"resumed_from_generation", state.resumedFrom},
+             {"reference_informative_frames", informativeSimFrames(obs).size()},
+             {"ground_band_m", job.groundBand},
+             {"warnings", warnings},
+             {"doubts", doubts},
+             {"compared_pixels",
+              {{"left_out_never_visible", obs.neverVisiblePixels},
+               {"left_out_liquid_in_background", obs.inBackgroundPixels},
+               {"reference_liquid_out_of_view_share", obs.referenceOutOfView}}},
+             {"history", history},
+             {"evaluated", evaluated},
+             {"timings", timingsOf(state.evaluated, result.seconds, alignmentCheckSeconds)}};
+    if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
+    // With several runs, how well θ* fits each: its evaluation's E per run, on the placement its
+    // fields come from.
+    for (const EvaluationRecord& e : state.evaluated)
+        if (!e.evaluation.runE.empty() && e.theta() == best.theta && e.gridShift == best.gridShift) {
+            doc["run_E"] = e.evaluation.runE;
+            break;
+        }
+    return doc;
 }
 
 void writeEvaluationsCsv(const Job& job, const std::vector<EvaluationRecord>& evaluated,

@@ -25,12 +25,10 @@ using Clock = std::chrono::steady_clock;
 enum class Fidelity { Coarse, Full };
 const char* fidelityName(Fidelity fidelity);  // "coarse", "full": the records' "fidelity"
 
-// The coarse grid's optimum is not the fine grid's: on the sample scene (η = 8 Pa·s, 2 s) the cup
-// drains 40 cm³ at 48³ and 64³, but 60 cm³ at 32³ and 69 cm³ at 36³, where the 18 mm hole is
-// 3–4 cells wide, and the best 32³ evaluations sat 25–35 % above the truth in identify_bench and
-// identification_table runs at 48³. On the job's grid, a third of the clip weighs the flow's phases
-// differently from all of it (truth 10 against a 64³ reference: frames 1–19 favour 9.2–9.8, frames
-// 21–39 favour 7.7), so the fine phase searches a log-space spread of ln 1.4 around the coarse best.
+// The coarse grid's optimum is not the fine grid's: a grid where the cup's hole is only a few cells
+// wide drains it faster, and its best evaluations sat above the truth. On the job's grid, a third of
+// the clip weighs the flow's phases differently from all of it, so the fine phase searches a
+// log-space spread of ln 1.4 around the coarse best (tests/bench/FINDINGS.md, "Figures moved from code comments").
 constexpr double kCoarseToFineShift = 0.35;
 
 // The grids and clips of the two fidelities (see the fidelity policy in identification.cpp).
@@ -207,6 +205,35 @@ struct AlignmentOutcome {
 AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
                                 const TimeBudget& budget, const std::function<void()>& saved);
+
+// One searched parameter at the end of the search: θ*, the final CMA-ES band, in one dimension the
+// profile fit and the alignment check, and the interval reported (results.cpp).
+struct ParameterEstimate {
+    double value = 0;  // θ*
+    double cmaMean = 0, logStd = 0;
+    std::array<double, 2> cma{};               // exp(m ± 2σ√C_ii), within the bounds
+    std::optional<nlohmann::json> profileFit;  // fitProfile's account, one-parameter searches only
+    std::optional<ProfileFit> profile;         // kept when its vertex lies among the fitted points
+    std::optional<AlignmentOutcome> alignment;
+    std::array<double, 2> interval{};  // settleInterval's
+    bool widenedByAlignment() const { return alignment && alignment->spread; }
+};
+// Parameter i's estimate at θ* = `value` before any alignment check: the CMA band from the final
+// distribution and, in one dimension, the profile fit over the full-fidelity evaluations.
+ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
+                                    const std::vector<EvaluationRecord>& evaluated, int i, double value);
+// The interval reported: the profile band when there is one, else the CMA band, widened by the
+// alignment check's spread, to contain θ*, and clipped into the bounds.
+void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);
+// "profile" or "cma", "+alignment" when the check widened it: IdentificationResult::intervalMethod.
+std::string intervalMethodName(const ParameterEstimate& estimate);
+
+// result.json (but its "fields", which FieldsStore::keep gives): θ* and its intervals, the search's
+// account (its history, every evaluation, timings), the warnings and the doubts.
+nlohmann::json resultDocument(const Job& job, const IdentificationResult& result, const SearchState& state,
+                              const FidelityPlan& plan, const Observation& observation,
+                              const std::vector<ParameterEstimate>& estimates, const BestPoint& best,
+                              const std::vector<std::string>& warnings, const std::vector<std::string>& doubts);
 
 // A doubt is a reason to think θ* wrong, one line each: result.json's "doubts", also sent as warnings.
 std::vector<std::string> doubtsBeforeSearch(const Observation& observation);

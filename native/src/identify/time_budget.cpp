@@ -7,24 +7,18 @@ namespace viscoscope::identify {
 
 namespace {
 
-// With a time budget, the coarse phase may use at most 35 % of it, and no more than leaves time for
-// the minimum full-fidelity generations. When the coarse grid was 32³, their (r/r_c)⁴ prediction
-// was 190 s per generation where 125–139 s were measured, and the reservation alone left the coarse
-// phase a single generation in a 10-minute run; hence the cap. Half the budget was too much once
-// the grid placements took turns by generation: each placement then gets every other full
-// generation, and at η = 300 on the sample cup (a scan and 7 more coarse generations, whose E over
-// the first third of the clip steps between a few values, the best found in the 6th) the half-cell
-// placement got one, and θ* sat 5.0 % high; with 35 % (a scan and 3 more) it got two, and 0.4 %.
-// (η = 1, whose full-fidelity E is flat within its jitter, went from 3.7 to 10.5 % with the same
-// two full generations; see the README's Table 1.) On the same grid over a third of the clip,
-// scaled by the frame count alone, the prediction was low instead (the first frames are the
-// cheapest): 110 and 126 s predicted, 135 and 133 s measured on the sample scene at 48³, η = 10, and
-// 160 against 200–230 s at η = 3; see predictedFullEvaluationSeconds for the better prediction.
+// With a time budget, the coarse phase may use at most kCoarseBudgetShare of it, and no more than
+// leaves time for the minimum full-fidelity generations. The reservation alone once left the coarse
+// phase a single generation in a 10-minute run (its prediction from a coarser grid ran high); hence
+// the cap. Half the budget was too much once the grid placements took turns by generation: each
+// placement then gets every other full generation, and a long coarse phase left the half-cell
+// placement a single one. Scaled by the frame count alone, the prediction ran low instead (the
+// first frames are the cheapest); see predictedFullEvaluationSeconds for the better prediction.
+// The figures: tests/bench/FINDINGS.md, "Figures moved from code comments".
 constexpr double kCoarseBudgetShare = 0.35;
 // Generations are predicted with this margin: without it, a generation that ran past the mean of
-// those before it ended the η = 30 row of the sample cup's table 5 s past its 600 s budget, and the
-// alignment check at η = 1 took 61.5 s where half the mean full-fidelity generation, 55 s, was
-// predicted.
+// those before it ended a run past its budget, and so did an alignment check that took longer than
+// half the mean full-fidelity generation (FINDINGS, "Figures moved from code comments").
 constexpr double kFineTimeMargin = 1.15;
 
 double mean(const std::vector<double>& v) {
@@ -38,11 +32,11 @@ double mean(const std::vector<double>& v) {
 std::string wholeSeconds(double seconds) { return std::to_string(std::lround(seconds)); }
 
 // Per evaluation near the coarse best rather than per coarse generation: the first coarse generation
-// scans the whole initial range, and its lowest θ costs the most. On the sample cup at η = 300 a
-// 77 s scan, the whole coarse phase, predicted 178 s per full generation where 68–77 s were
-// measured, and warned that the run would overrun its budget. The first frames are cheap (the
-// liquid is still in the cup and the time step long: 0.5 s a frame against 1.0–1.2 s later at
-// η = 3, 48³), so scaling by the frame count alone predicted 1.2–1.4× too little at η = 1–3.
+// scans the whole initial range, and its lowest θ costs the most: per generation, a scan that was
+// the whole coarse phase predicted more than twice what the full generations took, and warned of an
+// overrun that did not come. The first frames are cheap (the liquid is still in the cup and the
+// time step long), so scaling by the frame count alone predicts too little (tests/bench/FINDINGS.md,
+// "Figures moved from code comments").
 double predictedFullEvaluationSeconds(const std::vector<EvaluationRecord>& evaluated, const FidelityPlan& plan) {
     const std::optional<BestPoint> coarseBest = [&]() -> std::optional<BestPoint> {
         const EvaluationRecord* lowest = nullptr;

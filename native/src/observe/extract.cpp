@@ -79,9 +79,8 @@ private:
 
     // A translucent liquid thinly covering a pixel darkens the background without changing its
     // colour, which is MOG2's test for a shadow: the sample references' drops and streams lost
-    // their thin edges that way (the η = 100 one 10 % of the pixels its simulation covers, the
-    // others 1.4–2.6 %). Such pixels touching the liquid join it, and the coverage test then
-    // decides: a cast shadow touching the liquid darkens too little to pass it.
+    // their thin edges that way (tests/bench/FINDINGS.md, "Figures moved from code comments").
+    // Such pixels touching the liquid join it, and the coverage test then decides: a cast shadow touching the liquid darkens too little to pass it.
     void addShadedEdges(const cv::Mat& raw, cv::Mat1b& mask) const {
         const cv::Mat1b shaded = (raw > 0) & (mask == 0);
         cv::Mat1b touching;

@@ -62,10 +62,10 @@ struct ExtractionOptions {
     // with no change of colour, is a shadow. OpenCV's 0.5 also takes a small dark drop for one: a
     // phone's 4:2:0 chroma turns a 2-px drop grey, and it reads 0.45–0.65 of the background. Cast
     // shadows in the sample references read 0.57–0.96. Scored against their own truth, the five
-    // Table 1 references fit best at 0.7 (E 14–49 % below 0.5's; 0.8 and 0.9 are worse than 0.5).
+    // Table 1 references fit best at 0.7 (tests/bench/FINDINGS.md, "Figures moved from code comments").
     double shadowThreshold = 0.7;
     // Edge pixels the liquid covers less than this share of are dropped (0 = keep MOG2's outline).
-    // MOG2 flags a pixel the outline only grazes (≈ 10 % covered), while a simulated silhouette holds
+    // MOG2 flags a pixel the outline only grazes, while a simulated silhouette holds
     // the pixels whose centre is inside, i.e. about half covered: without this the reference is
     // ~0.4 px fatter on every side, which biases η low (see extract.cpp). With it, pixels MOG2 calls
     // shadows that touch the liquid are tested too: a translucent liquid's edge reads as one.
@@ -310,13 +310,8 @@ double totalObjective(const std::vector<ObjectiveTerm>& terms);
 
 // The puddle's rows: on a coarse identification grid the liquid spreading on the ground is
 // resolved worst, and its radius grows only as η^(-1/8), so it says little about η and much about
-// Δx. The sample cup (a 96³ reference, 48³ at seed 3; row-width E summed over frames 1–60, ×10⁻³),
-// rows above and in the default band (25 mm):
-//   η = 10, at 8 / 8.8 / 9 / 9.5 / 10 / 10.5 / 11 / 12: above 50 / 41 / 38 / 31 / 28 / 35 / 43 / 52,
-//   least at the truth; in it 55 / 46 / 57 / 46 / 63 / 58 / 77 / 89, least 5–12 % below it.
-//   η = 1, at 0.7 / 0.85 / 0.93 / 1 / 1.07 / 1.15 / 1.3: above 36 / 35 / 34 / 35 / 39 / 41 / 45,
-//   nearly flat (a stream 6 px wide that hardly narrows with η); in it 85 / 83 / 129 / 178 / 221 /
-//   269 / 348, least 15 % below the truth. Neither finds η = 1.
+// Δx: on the sample cup the rows above the band scored least at the truth and the rows in it below
+// it (tests/bench/FINDINGS.md, "Figures moved from code comments").
 // The band is the image rows on the ground's side of the point `band` metres above the ground on
 // the axis of the first cup with a hole (its outlet); `compared` is returned with them set to 0
 // (an empty `compared`, all pixels, becomes a mask of the camera's size first). Unchanged when

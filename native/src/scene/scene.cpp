@@ -263,19 +263,10 @@ MaterialModel parseModel(const FieldReader& r) {
 
 }  // namespace
 
-// kMinHoleCells: measured on the sample scene (18 mm hole, η = 8 Pa·s, 2 s, seed 1): the cup drained 46.4 cm³
-// with the hole 3.2 cells across (32³), 63.5 at 3.6, 44.3 at 4.0, 38.3 at 4.8 and 39.9 at 6.4.
-// (Before faces passed flux through their open area only: 60.0, 68.9, 43.8, 39.7 and 40.0. With
-// CFL 2 instead of 1: 46.5, 63.7, 44.3, 38.3 and 39.9.) Above the threshold the drain still depends
-// on where the grid sits: at η = 1 (share drained by frame 8, seed 3, the cup as is and moved half a
-// cell along x and y) the hole 4.8 cells across drained 3.5 % and 20 % more than at 12.8, where both
-// placements agree within 0.3 %; 6.4 cells: 8 % and 8 %; 9.6: 2.0 % and −0.9 %. identify's alignment
-// check puts that spread into the interval rather than a warning here.
-// Since holes are calibrated (solver.hole_conductance, HoleCalibration in sim/sim.h), for a free
-// jet, the share drained by frame 60 (seed 1) is 0.196, 0.176, 0.184, 0.189 and 0.185 at 32³–64³
-// (3.2–6.4 cells), against 0.224, 0.352, 0.251, 0.204 and 0.214 with the faces alone: 36³ drains
-// 5 % less than 64³, 32³ 6 % more (tests/bench/drain_alignment.py --resolutions 32,36,40,48,64
-// --shifts 0 --viscosity 8 --frames 60 --seed 1).
+// kMinHoleCells: below it the cup's drain depends on the hole's width in cells; above it, it still
+// depends on where the grid sits, and identify's alignment check puts that spread into the interval
+// rather than a warning here. Calibrated holes (solver.hole_conductance, HoleCalibration in
+// sim/sim.h) drain nearly alike on every grid (tests/bench/FINDINGS.md, "Figures moved from code comments").
 
 std::vector<std::string> resolutionWarnings(const Scene& scene) {
     std::vector<std::string> warnings;

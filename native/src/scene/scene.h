@@ -140,17 +140,18 @@ struct Material {
 
 enum class StokesScheme { Unified, Decoupled };
 // How a cup's hole conducts liquid. Grid: as its cut faces do, which at a few cells across passes
-// up to 1.7× the Stokes flux, by where the grid sits. Dagan: a drag on those faces, sized so that
-// the grid's steady Stokes flux into a free jet matches the free exit's, which is 1.2× Dagan,
-// Weinbaum & Pfeffer's flux with liquid on both sides (HoleCalibration in sim/sim.h).
+// more than the Stokes flux, by where the grid sits. Dagan: a drag on those faces, sized so that
+// the grid's steady Stokes flux into a free jet matches the free exit's, a fixed multiple of Dagan,
+// Weinbaum & Pfeffer's flux with liquid on both sides (HoleCalibration in sim/sim.h; the figures:
+// tests/bench/FINDINGS.md, "Figures moved from code comments").
 enum class HoleConductance { Dagan, Grid };
 
 struct SolverSettings {
     StokesScheme scheme = StokesScheme::Unified;
     double tolerance = 1e-4;      // relative residual of the Stokes solve
     int maxIterations = 2000;
-    // Cells a particle may cross per step. 2 rather than 1 halves the steps of fast flows: the
-    // sample cup at η = 3 Pa·s, 48³, ran 1.8× faster and drained within 0.6 % of the same. Its
+    // Cells a particle may cross per step. 2 rather than 1 halves the steps of fast flows at nearly
+    // the same drain (tests/bench/FINDINGS.md, "Figures moved from code comments"). Its
     // first liquid's tip fell too slowly at 2 until the start of motion got shorter steps of its
     // own (kStartupStepShare in sim/simulation.cpp).
     double cfl = 2.0;

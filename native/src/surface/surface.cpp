@@ -101,8 +101,8 @@ openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& posit
         }
         // Near the half level, (½ − ρ)/|∇ρ| is the distance to it to first order, which is all a
         // narrow band needs (at σ from it, 1.4 times the distance). Rebuilding a distance field
-        // through a mesh (tools::levelSetRebuild) cost 9–11 times the rest and drew the sample
-        // cup's stream 2–5 % narrower.
+        // through a mesh (tools::levelSetRebuild) cost many times the rest and drew the sample
+        // cup's stream narrower (tests/bench/FINDINGS.md, "Figures moved from code comments").
         const auto rho = [&](const openvdb::Coord& c) { return density.getValue(c); };
         for (auto voxel = inner.begin(); voxel; ++voxel) {
             const openvdb::Coord& c = *voxel;

@@ -22,14 +22,14 @@ namespace viscoscope::surface {
 // smoothed by a Gaussian of `smoothing` σ (m) and sampled on voxels of `voxelSize` (m). ρ is 1 inside
 // the liquid and ½ at a flat edge whatever σ, so the surface lies where the liquid ends; across a
 // stream of radius R it moves in by about σ²/2R. With σ and the voxels fixed in metres that is the
-// same on every grid: the sample cup's stream at η = 1 drew 1.3 % less silhouette at 48³ than at
-// 96³, where spheres around the particles (whose outline is the outermost particle, further out
-// the more particles there are) drew 7 % less (tests/bench/surface_outline_bench).
+// same on every grid, unlike spheres around the particles (whose outline is the outermost
+// particle, further out the more particles there are; tests/bench/surface_outline_bench, and
+// tests/bench/FINDINGS.md, "Figures moved from code comments").
 openvdb::FloatGrid::Ptr liquidLevelSet(const std::vector<Eigen::Vector3d>& positions, double particleVolume,
                                        double smoothing, double voxelSize);
 // The surface of a simulation's liquid at its scene's surface smoothing σ, on voxels of
-// σ / kVoxelsPerSmoothing: at 48³ voxels of σ/0.75 (the cell's half) drew that stream 5 % narrower
-// than σ/1.5, which the 96³ reference's seeding spacing gives.
+// σ / kVoxelsPerSmoothing: coarser voxels (the cell's half) drew that stream narrower than σ/1.5,
+// which the finest reference's seeding spacing gives (FINDINGS, as above).
 constexpr double kVoxelsPerSmoothing = 1.5;
 double surfaceVoxelSize(double smoothing);
 openvdb::FloatGrid::Ptr liquidLevelSet(const sim::Simulation& simulation);
