@@ -1,4 +1,5 @@
-"""The engine's parameter declarations, as `viscoscope schema` prints them into engine_schema.json.
+"""The engine's parameter declarations and diagnosable effects, as `viscoscope schema` prints them
+into engine_schema.json.
 
 The panel's bounds and defaults, the job's search bounds and the grid the cup's hole needs come
 from here, never from numbers copied out of the engine; tests/blender/test_contract.py fails when
@@ -13,6 +14,8 @@ with open(os.path.join(os.path.dirname(__file__), "engine_schema.json"), encodin
     SCHEMA = json.load(_fh)
 
 PARAMETERS = {p["name"]: p for p in SCHEMA["parameters"]}
+# The effects `viscoscope diagnose` can add, in the order it fits them: name, description, source.
+EFFECTS = SCHEMA["effects"]
 MIN_HOLE_CELLS = SCHEMA["min_hole_cells"]
 
 

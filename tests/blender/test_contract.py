@@ -30,6 +30,21 @@ def test_shipped_schema_is_the_engines(engine_path):
         "addon/engine_schema.json is stale: regenerate it with `viscoscope schema > addon/engine_schema.json`"
 
 
+def test_the_docs_list_the_engines_effects():
+    """docs/engine.md's table of diagnose's effects is the engine's (schema.EFFECTS, from its table of
+    records), row for row, and the README names each."""
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    with open(os.path.join(repo, "docs", "engine.md"), encoding="utf-8") as fh:
+        rows = [line for line in fh if line.startswith("| `")]
+    listed = [[cell.strip() for cell in row.strip().strip("|").split("|")] for row in rows]
+    effects = [["`%s`" % e["name"], e["description"], e["source"]] for e in schema.EFFECTS]
+    assert [row for row in listed if row[0] in {e[0] for e in effects}] == effects
+    with open(os.path.join(repo, "README.md"), encoding="utf-8") as fh:
+        readme = fh.read()
+    for e in schema.EFFECTS:
+        assert e["name"].replace("_", " ") in readme, e["name"]
+
+
 def test_fluid_panel_holds_every_material_parameter_within_its_declared_bounds(ctx):
     fluid_rna = ctx.scene.viscoscope.fluid.bl_rna.properties
     material = {name for name, p in schema.PARAMETERS.items() if p["home"] in ("material", "material.model")}

@@ -239,4 +239,41 @@ TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
     fs::remove_all(dir);
 }
 
+// A new effect is a record (diagnose/effect.h): this one, declared here and nowhere in the engine,
+// searches the slip length under another name. diagnose fits and names it from the catalogue it is
+// given, as it does the engine's own (with η fixed, as above, so that slip alone explains the film).
+TEST(FilmDiagnosis, TakesANewEffectAsARecord) {
+    const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_record_" + std::to_string(::getpid()));
+    fs::create_directories(dir);
+    const double eta = 50, slip = 0.003;
+    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}});
+    json job = radiusJob();
+    job.erase("parameters");
+    job["fixed"] = {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}};
+    std::ofstream(dir / "job.json") << job.dump();
+    diagnose::Effect toy;
+    toy.name = "toy_slip";
+    toy.description = "the slip length, under a name the engine does not know";
+    toy.source = "this test";
+    toy.parameters = [](const diagnose::BaseFit&, std::vector<diagnose::AddedParameter>& added) {
+        added.push_back({diagnose::searchedParameter("slip_length", 1e-4, 1.5)});
+        return std::string();
+    };
+    const std::vector<diagnose::Effect> catalogue{toy};
+    diagnose::DiagnoseOptions options;
+    options.catalogue = &catalogue;
+    const diagnose::Diagnosis d = diagnose::diagnose(identify::loadJob(dir / "job.json"), dir / "out", options);
+    ASSERT_EQ(d.candidates.size(), 1u);
+    ASSERT_TRUE(d.chosen.has_value());
+    const diagnose::ModelFit& after = d.candidates[*d.chosen];
+    std::printf("toy_slip: slip %.3g mm (truth %.1f); radius error %.2f %% before, %.2f %% after\n", 1e3 * after.theta[0],
+                1e3 * slip, 100 * *d.base.trackError, 100 * *after.trackError);
+    EXPECT_EQ(d.document.at("chosen"), "toy_slip");
+    EXPECT_EQ(d.document.at("candidates")[0].at("description"), toy.description);
+    EXPECT_NEAR(after.theta[0] / slip, 1.0, 0.25);
+    options.effects = {"wall_slip"};
+    EXPECT_THROW(diagnose::diagnose(identify::loadJob(dir / "job.json"), dir / "out2", options), InputError);
+    fs::remove_all(dir);
+}
+
 }  // namespace

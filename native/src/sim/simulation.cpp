@@ -38,9 +38,9 @@ void pollCancelEachSlab(const Lattice& cells, int c, const char* what) {
 // what emitters added since) over this time.
 constexpr double kVolumeRelaxationTime = 0.1;  // s
 // A Picard iterate that moves η (RMS over the liquid, relative) by less than this ends the step's
-// iteration. 1 % let a Bingham slump creep on past its arrest (its plugs' capped η hardly moves
-// while their flow still does); 0.1 % leaves the slump and the power-law current as they were
-// (tests/bench/FINDINGS.md, "Picard iterations while η changes").
+// iteration. Ten times looser let a Bingham slump creep on past its arrest (its plugs' capped η
+// hardly moves while their flow still does); this one leaves the slump and the power-law current as
+// they were (tests/bench/FINDINGS.md, "Picard iterations while η changes").
 constexpr double kPicardTolerance = 1e-3;
 // The start of motion: until liquid released at rest could have fallen the domain's height, a step
 // is at most this share of √(Δx/g). The CFL limit alone lets the first steps span 2 cells of fall,
@@ -75,7 +75,7 @@ bool insideSource(const LiquidSource& source, const std::vector<Solid>& solids, 
 // covers the domain, until the underside of the first cup with a hole lies just below a row of
 // z-faces. Where the underside falls between faces decides how fast the pendant stream under the
 // hole extends, by an error of order Δx; just below a face it is converged already at 48³. It is
-// put 2 % of a cell below the face, not on it, where rounding would decide whether the face is shut.
+// put a fiftieth of a cell below the face, not on it, where rounding would decide whether the face is shut.
 // Lowered, never raised: a ground at the domain's floor stays inside the grid. The ground then sits
 // wherever the fall puts it, and that moves the puddle by an error of order Δx too; a Δx that put
 // both in place identified better but still far off, so the grid is left as it is. A slumping block

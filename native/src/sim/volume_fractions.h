@@ -17,7 +17,7 @@ class SolidField;
 // centre count in it.
 inline constexpr double kLiquidKernelRadius = 1.5;
 
-// The non-solid fraction of every half-cell of `grid` (2× its cells per axis, x fastest): the one
+// The non-solid fraction of every half-cell of `grid` (twice its cells per axis, x fastest): the one
 // sub-cell sampling all control volumes share. Polls for cancellation.
 std::vector<double> halfCellOpenFractions(const SolidField& solids, const Grid& grid);
 

@@ -40,11 +40,12 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
     consistency["min"] = std::max(eta.lower, etaStar / 100);
     consistency["max"] = etaStar;
     added.push_back({consistency, etaStar, true});
-    // τ_y up to the liquid's hydrostatic stress ρ g h₀, from a tenth of it, and down to 1 % of it:
-    // below, a yield stress hardly changes the flow and E is flat over many decades of ln τ_y, where
-    // the search drifted (FINDINGS, as above). Down to 1 % of the base flow's viscous stress η* γ̇_c
-    // where that is less: the least τ_y is the base-equivalent point, and in a slow flow 1 % of
-    // ρ g h₀ arrests the front (FINDINGS, "The particle-laden dam break with every candidate").
+    // τ_y up to the liquid's hydrostatic stress ρ g h₀, from a tenth of it, and down to a hundredth
+    // of it: below, a yield stress hardly changes the flow and E is flat over many decades of ln τ_y,
+    // where the search drifted (FINDINGS, as above). Down to a hundredth of the base flow's viscous
+    // stress η* γ̇_c where that is less: the least τ_y is the base-equivalent point, and in a slow
+    // flow a hundredth of ρ g h₀ arrests the front (FINDINGS, "The particle-laden dam break with
+    // every candidate").
     nlohmann::json yieldStress =
         searchedParameter("yield_stress", findParameterDeclaration("yield_stress")->searchInitial, kNewLogSpread);
     if (const double stress = hydrostaticStress(base.job.scene); stress > 0) {
