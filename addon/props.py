@@ -242,6 +242,7 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     # Diagnosis: diagnosis.json's conclusion, its figures one line each, and the chosen model's
     # material as the engine writes it (JSON), which Apply Effect puts into the Fluid Material.
     diagnosis_conclusion: StringProperty(name="Conclusion", default="")
+    diagnosis_verdict: StringProperty(default="")  # missing_effect, no_missing_effect or cannot_tell
     diagnosis_report: StringProperty(name="Report", default="")
     diagnosis_effect: StringProperty(name="Effect", default="")
     diagnosis_material: StringProperty(default="")

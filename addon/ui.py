@@ -325,7 +325,8 @@ class VIEW3D_PT_viscoscope_diagnose(_ViscoscopePanel, bpy.types.Panel):
         if not vs.diagnosis_conclusion:
             return
         box = layout.box()
-        draw_message(box, context, vs.diagnosis_conclusion.capitalize(), icon='VIEWZOOM')
+        icon = {'missing_effect': 'VIEWZOOM', 'no_missing_effect': 'CHECKMARK'}.get(vs.diagnosis_verdict, 'ERROR')
+        draw_message(box, context, vs.diagnosis_conclusion[:1].upper() + vs.diagnosis_conclusion[1:], icon=icon)
         for line in vs.diagnosis_report.splitlines():
             draw_message(box, context, line)
         if vs.diagnosis_material:

@@ -50,6 +50,8 @@ def main(out_dir):
     base = diagnosis["base"]
     chosen = next((c for c in diagnosis["candidates"] if c["model"] == diagnosis["chosen"]), None)
     runs = len(base["residual_over_time"])
+    verdict = {"missing_effect": "missing effect: %s" % (chosen or {}).get("title", diagnosis["chosen"]),
+               "no_missing_effect": "no missing effect", "cannot_tell": "cannot tell"}[diagnosis["verdict"]]
     shown = chosen or base
     new = [n for n in shown["parameters"] if chosen is None or n not in base["parameters"]]
     path = os.path.join(out_dir, shown["folder"], "evaluations.csv")
@@ -70,13 +72,17 @@ def main(out_dir):
             ax.axvline(max(fitted), color="gray", linestyle="--")
         ax.axhline(0, color="black", linewidth=0.5)
         ax.set_xlabel("time (s)")
-        ax.set_title(f"run {r + 1}: {diagnosis['conclusion']}")
+        ax.set_title(f"run {r + 1}: {verdict}")
         ax.legend()
     ax = fig.add_subplot(grid[runs, :])
     models = [base] + diagnosis["candidates"]
     x = range(len(models))
     ax.bar([i - 0.2 for i in x], [m["fitted_E"] for m in models], width=0.4, label="fitted frames")
     ax.bar([i + 0.2 for i in x], [m["held_out_E"] for m in models], width=0.4, label="held-out frames")
+    visible = diagnosis["noise_floor"]["visible_share"]
+    if 0 < visible < 1:
+        ax.axhline(base["held_out_E"] * (1 - visible), color="C1", linestyle=":",
+                   label="held-out E a named effect must beat (noise floor)")
     ax.set_xticks(list(x))
     ax.set_xticklabels([m["model"] for m in models])
     ax.set_yscale("log")

@@ -3,6 +3,7 @@ each fit's checkpoint, Resume continues), show its conclusion and figures, and A
 the chosen model's material into the Fluid Material."""
 
 import json
+import math
 import os
 import re
 
@@ -32,8 +33,8 @@ def describe_parameter(name, fit):
 def describe_model(entry):
     """One line of a fitted model: its parameters, its error on the held-out frames, its BIC."""
     parameters = ", ".join(describe_parameter(name, fit) for name, fit in sorted(entry["parameters"].items()))
-    line = "%s: %s; held-out E %.3g, BIC %.1f" % (entry["model"], parameters or "nothing searched",
-                                                  entry["held_out_E"], entry["bic"])
+    line = "%s: %s; held-out E %.3g, BIC %.1f" % (entry.get("title", entry["model"]).capitalize(),
+                                                  parameters or "nothing searched", entry["held_out_E"], entry["bic"])
     if "track_error" in entry:
         line += ", track error %.2f %%" % (100 * entry["track_error"])
     if "earns_its_parameters" in entry:
@@ -53,6 +54,17 @@ def describe_errors(errors):
     return "Error before → after: " + "; ".join(parts)
 
 
+def describe_noise_floor(noise):
+    """The noise floor in one line: how much the simulation alone moves the held-out E."""
+    if noise["deterministic"]:
+        return "Noise floor: none (the forward model is deterministic)"
+    scorings = len(noise["held_out_E"])
+    if scorings < 2:
+        return "Noise floor: not measured (one scoring of the base's best fit)"
+    return ("Noise floor: the base's held-out E scatters by a factor %.2f over %d seeds and grid placements; "
+            "gains under %.0f %% are within it" % (math.exp(noise["log_spread"]), scorings, 100 * noise["visible_share"]))
+
+
 def read_diagnosis(context, out_dir):
     """DIR/diagnosis.json into the Diagnose panel; diagnosis.png as its preview."""
     path = os.path.join(out_dir, "diagnosis.json")
@@ -65,8 +77,10 @@ def read_diagnosis(context, out_dir):
     after = next((m for m in models[1:] if m["model"] == chosen), None) if chosen else doc["base"]
     if after is None:
         raise ValueError("%s chose %r, which is not among its candidates" % (path, chosen))
-    lines = ["Warning: %s" % w for w in doc.get("warnings", ())]
-    lines += [describe_errors(doc["errors"])] + [describe_model(m) for m in models]
+    lines = ["What would tell: %s" % t for t in doc["what_would_tell"]]
+    lines += ["Warning: %s" % w for w in doc.get("warnings", ())]
+    lines += [describe_noise_floor(doc["noise_floor"]), describe_errors(doc["errors"])]
+    lines += [describe_model(m) for m in models]
     refit = doc.get("base_refit")
     if refit:
         lines.append("The base refit from where %s's fit puts it %s; the other base fit: %s"
@@ -80,6 +94,7 @@ def read_diagnosis(context, out_dir):
                      % (chosen, ", ".join(describe_parameter(n, after["parameters"][n]) for n in geometry)))
     vs = context.scene.viscoscope
     vs.diagnosis_conclusion = doc["conclusion"]
+    vs.diagnosis_verdict = doc["verdict"]
     vs.diagnosis_effect = chosen or ""
     vs.diagnosis_report = "\n".join(lines)
     vs.diagnosis_material = json.dumps(after["material"]) if chosen else ""

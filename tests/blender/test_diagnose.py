@@ -115,10 +115,12 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
     assert candidates, statuses
     progress = [p for n, p, s in seen if n == 2]
     assert progress == sorted(progress) and st.progress == pytest.approx(100.0), progress
-    assert vs.diagnosis_conclusion == "no missing effect", vs.diagnosis_report
+    assert vs.diagnosis_verdict == "no_missing_effect", vs.diagnosis_conclusion + "\n" + vs.diagnosis_report
+    assert vs.diagnosis_conclusion.startswith("no missing effect: none of shear thinning")
     report = vs.diagnosis_report.splitlines()
-    assert report[0].startswith("Error before → after:") and "track" in report[0], report
-    base = next(line for line in report if line.startswith("base: "))
+    assert "Noise floor: none (the forward model is deterministic)" in report, report
+    assert any(line.startswith("Error before → after:") and "track" in line for line in report), report
+    base = next(line for line in report if line.startswith("Base: "))
     eta = float(base.split("η ")[1].split()[0])
     # Huppert's law is the point-source limit; the film's disc feeds a 5 mm hole (film_test: within
     # 1 % of the law at 300 cells, here 150 and early times, where r ∝ η^(-1/8) is insensitive).
@@ -142,7 +144,7 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
     # A changed job runs afresh in the same folder: the earlier run's checkpoints would be refused.
     vs.eta_initial = 30.0
     assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'FINISHED'}, st.error
-    assert vs.diagnosis_conclusion == "no missing effect"
+    assert vs.diagnosis_verdict == "no_missing_effect", vs.diagnosis_conclusion
 
 
 def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_work, engine_path, use_engine):
@@ -161,7 +163,8 @@ def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_w
     vs = ctx.scene.viscoscope
     out_dir = os.path.join(diagnose_dir(ctx.scene), "out")
     assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'FINISHED'}, vs.diagnose_job.error
-    assert vs.diagnosis_conclusion == "missing effect: shear_thinning", vs.diagnosis_report
+    assert vs.diagnosis_verdict == "missing_effect", vs.diagnosis_conclusion + "\n" + vs.diagnosis_report
+    assert vs.diagnosis_conclusion.startswith("missing effect: shear thinning (shear_thinning)"), vs.diagnosis_conclusion
     assert vs.diagnosis_effect == "shear_thinning"
     errors = next(line for line in vs.diagnosis_report.splitlines() if line.startswith("Error before → after"))
     before, after = (float(x.rstrip(" %;")) for x in errors.split("track ")[1].split(" → "))
@@ -175,7 +178,7 @@ def test_diagnose_finds_shear_thinning_and_apply_writes_the_power_law(ctx, tmp_w
     assert fluid.flow_index == pytest.approx(chosen["parameters"]["flow_index"]["value"], rel=1e-6)
     assert fluid.consistency == pytest.approx(chosen["parameters"]["consistency"]["value"], rel=1e-6)
     assert abs(fluid.flow_index - n) < 0.15, fluid.flow_index
-    assert "thinning.csv" in fluid.identified_from and "shear_thinning" in fluid.identified_from
+    assert "thinning.csv" in fluid.identified_from and "Shear thinning" in fluid.identified_from
     assert vs.diagnosis_applied and not bpy.ops.viscoscope.apply_effect.poll()
 
     # The applied material is one the engine reads, with the law and values the diagnosis found.

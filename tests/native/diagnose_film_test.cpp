@@ -120,6 +120,10 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
         }
         std::printf("\n");
         EXPECT_EQ(chosen, hidden.expected);
+        // The film is deterministic: nothing scatters, and a control is plainly without an effect.
+        EXPECT_TRUE(d.noise.deterministic);
+        EXPECT_EQ(d.verdict, *hidden.expected ? diagnose::Verdict::MissingEffect : diagnose::Verdict::NoMissingEffect)
+            << d.document.at("conclusion");
         if (d.chosen) EXPECT_LE(*after.trackError, 0.5 * *d.base.trackError) << hidden.expected;
         for (size_t i = 0; i < after.parameters.size(); ++i)
             if (const auto truth = hidden.truth.find(after.parameters[i]); truth != hidden.truth.end())
@@ -172,6 +176,13 @@ TEST(FilmDiagnosis, SharesItsTimeBudgetAmongTheFits) {
         lastScoring = fit.at("scoring_seconds").get<double>();
     }
     EXPECT_EQ(doc.at("time_budget_s").get<double>(), options.timeBudget);
+    // Every search cut short: the diagnosis cannot tell, and says that more time would.
+    EXPECT_EQ(doc.at("verdict"), "cannot_tell") << doc.at("conclusion");
+    EXPECT_FALSE(d.chosen.has_value());
+    const json& tell = doc.at("what_would_tell");
+    EXPECT_TRUE(std::any_of(tell.begin(), tell.end(), [](const json& t) {
+        return t.get<std::string>().find("--time-budget") != std::string::npos;
+    })) << tell;
     // Overspent, since every search made its minimum generations: said in diagnosis.json.
     const json& warnings = doc.at("warnings");
     EXPECT_TRUE(std::any_of(warnings.begin(), warnings.end(), [](const json& w) {
@@ -253,6 +264,7 @@ TEST(FilmDiagnosis, TakesANewEffectAsARecord) {
     std::ofstream(dir / "job.json") << job.dump();
     diagnose::Effect toy;
     toy.name = "toy_slip";
+    toy.title = "toy slip";
     toy.description = "the slip length, under a name the engine does not know";
     toy.source = "this test";
     toy.parameters = [](const diagnose::BaseFit&, std::vector<diagnose::AddedParameter>& added) {

@@ -22,6 +22,7 @@ struct DiagnoseArguments {
     int threads = 0;
     double fitShare = 2.0 / 3;
     double timeBudget = 0;
+    int scatterReplicas = diagnose::DiagnoseOptions{}.scatterReplicas;
     std::vector<std::string> effects;
     bool noPlots = false;
 };
@@ -35,6 +36,7 @@ int runDiagnose(const DiagnoseArguments& args) {
     options.fitShare = args.fitShare;
     options.effects = args.effects;
     options.timeBudget = args.timeBudget;
+    options.scatterReplicas = args.scatterReplicas;
     options.identify.threads = args.threads;
     options.identify.onWarning = [&](const std::string& warning) { progress.warn(warning); };
     std::string model;
@@ -55,6 +57,7 @@ int runDiagnose(const DiagnoseArguments& args) {
         const nlohmann::json& doc = diagnosis.document;
         progress.report({{"event", "done"},
                          {"stage", "diagnose"},
+                         {"verdict", doc.at("verdict")},
                          {"conclusion", doc.at("conclusion")},
                          {"chosen", doc.at("chosen")},
                          {"errors", doc.at("errors")},
@@ -86,6 +89,11 @@ Command addDiagnoseCommand(CLI::App& app) {
         ->capture_default_str();
     sub->add_option("--time-budget", args->timeBudget,
                     "Wall seconds for the whole diagnosis, shared by its fits (0 = each fit has the job's time_budget_s)")
+        ->capture_default_str();
+    sub->add_option("--scatter-replicas", args->scatterReplicas,
+                    "Scorings of the base's best fit on other particle seeds and grid placements, which measure the "
+                    "noise floor an effect must stand above (0 = none: the diagnosis then cannot name an effect)")
+        ->check(CLI::NonNegativeNumber)
         ->capture_default_str();
     sub->add_option("--effects", args->effects, "Candidate effects (default: every one the scene can hold): " + effects.str())
         ->delimiter(',');

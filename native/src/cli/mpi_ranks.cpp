@@ -61,7 +61,9 @@ std::vector<size_t> shareOf(const identify::EvaluationBatch& batch, int rank, in
 }
 
 identify::EvaluationBatch subBatch(const identify::EvaluationBatch& batch, const std::vector<size_t>& share) {
-    identify::EvaluationBatch part{{}, batch.coarse, batch.resolution, batch.gridShift, {}};
+    identify::EvaluationBatch part = batch;
+    part.thetas.clear();
+    part.fieldsDirs.clear();
     for (size_t k : share) {
         part.thetas.push_back(batch.thetas[k]);
         if (!batch.fieldsDirs.empty()) part.fieldsDirs.push_back(batch.fieldsDirs[k]);

@@ -1,9 +1,12 @@
 // The diagnose stage's face: from the residual of the best fit to the physical effect the model
 // lacks (DESIGN.md, "Diagnosis: closing the loop"). The job's model (the base) and each candidate
 // effect the scene can hold (effect.h, effects()) are fitted to the first part of the reference
-// (each its own identification) and scored on all of it; a candidate is chosen only when it
-// predicts the held-out rest better than the base by a clear margin and pays for its parameters in
-// the fitted part (BIC), else "no missing effect".
+// (each its own identification) and scored on all of it. The base's θ* is scored again on other
+// particle seeds and grid placements, which measures how much the forward model alone moves the
+// held-out E (the noise floor). The conclusion is one of three: a missing effect, named when its fit
+// predicts the held-out rest better than the base by a clear margin, by more than the noise floor
+// explains, and pays for its parameters in the fitted part (BIC); no missing effect, where such a
+// gain would have shown and none did; or cannot tell, with what would tell.
 #pragma once
 
 #include "diagnose/effect.h"
@@ -35,6 +38,9 @@ struct DiagnoseOptions {
     // search gets an equal share of what the fits before it left, less the time its scoring on
     // every frame is predicted to take.
     double timeBudget = 0;
+    // Further scorings of the base's θ* on other particle seeds and grid placements, for the noise
+    // floor (a thin film has none to measure: its model is deterministic).
+    int scatterReplicas = 2;
     // Before each fit: its model ("base" or an effect's name), its index, the number of fits and the
     // parameters it searches.
     std::function<void(const std::string& model, int index, int count, const std::vector<std::string>& parameters)> onFit;
@@ -59,12 +65,35 @@ struct ModelFit {
     std::optional<identify::StopReason> stop;  // why the search ended; none when there was nothing to search
     // The material θ* implies, as a scene file's "material" holds it: what the add-on applies.
     nlohmann::json material;
+    // Its search ran to its own end (a tolerance or the job's max_generations), or there was nothing
+    // to search: it was not cut short by a time budget or a cancel.
+    bool searchCompleted() const;
 };
+
+// The forward model's own scatter at the base's θ*: its held-out E on the base's seed and grid
+// placements and again on others. Measured in ln E: E sums squared errors, and its scatter grows
+// with it (the collapsing column's held-out E moved by a factor 2.7 over three scorings where the
+// base fitted poorly: tests/bench/FINDINGS.md, "The noise floor of a diagnosis").
+struct NoiseFloor {
+    std::vector<double> heldOutE;  // the base's scoring first, then each replica's
+    bool deterministic = false;    // a forward model without seed or grid (the thin film)
+    double seconds = 0;            // the replicas'
+    double logSpread() const;      // the sample standard deviation of ln heldOutE
+    // The least held-out gain of one fit over another, as a share of the other's held-out E, that
+    // the scatter does not explain: 1 − exp(−t(0.95, m − 1) √2 · logSpread) over m samples; 0 for a
+    // deterministic model, 1 (no gain) with fewer than two samples.
+    double visibleShare() const;
+};
+
+enum class Verdict { MissingEffect, NoMissingEffect, CannotTell };
+const char* toString(Verdict verdict);  // "missing_effect", "no_missing_effect", "cannot_tell"
 
 struct Diagnosis {
     ModelFit base;
     std::vector<ModelFit> candidates;
-    std::optional<size_t> chosen;  // into candidates; none: no missing effect
+    NoiseFloor noise;
+    Verdict verdict = Verdict::CannotTell;
+    std::optional<size_t> chosen;  // into candidates, with Verdict::MissingEffect
     nlohmann::json document;       // what diagnosis.json holds
 };
 

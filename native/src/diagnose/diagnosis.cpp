@@ -1,13 +1,13 @@
 // Diagnosis: fit the base model and each candidate effect to the first part of every run, predict
-// the rest, and keep an effect only when it earns its parameters there.
+// the rest, measure how much the forward model alone moves that prediction, and conclude
+// (conclusion.h).
 //
 // Out of sample, because in sample any added parameter lowers E: the fit sees each run's first
 // fitShare of compared frames, and the held-out later frames are where a missing effect shows most
-// (a front that stops in the footage but not in the simulation, a flow that slows differently). A
-// candidate is chosen when (a) its held-out E is below (1 − kHeldOutGain) of the base's and (b) its
-// BIC over the fitted frames is below the base's; of those, the one with the least held-out E.
+// (a front that stops in the footage but not in the simulation, a flow that slows differently).
 #include "diagnose/diagnose.h"
 
+#include "diagnose/conclusion.h"
 #include "diagnose/effects/effects.h"
 #include "diagnose/model_fit.h"
 #include "sim/sim.h"
@@ -23,9 +23,6 @@ using namespace identify;
 
 namespace {
 
-// The held-out improvement a candidate must make: a fifth of the base's held-out E, so that a
-// candidate which only moves within the fits' own scatter (grid, seed) is not taken for an effect.
-constexpr double kHeldOutGain = 0.2;
 // A fit whose added parameters all end within this log distance of their base-equivalent values (n
 // = 1, τ_y or the slip at its least, the channel at its widest) is the base model: when it predicts
 // better, the base fit was not converged, which is not an effect (on the measured particle-laden dam
@@ -180,14 +177,31 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         else refused.emplace_back(effect.name, why);
     }
     const int fits = 1 + static_cast<int>(candidates.size());
+    // The steps the progress counts: the fits and the noise floor after the base's.
+    const bool measuresScatter = options.scatterReplicas > 0;
+    const int steps = fits + (measuresScatter ? 1 : 0);
+    int step = 0;
 
+    json warnings = json::array();
+    const auto warn = [&](const std::string& line) {
+        warnings.push_back(line);
+        if (options.identify.onWarning) options.identify.onWarning(line);
+    };
     Diagnosis diagnosis;
     json baseSeries;
-    if (options.onFit) options.onFit("base", 0, fits, parameterNames(job));
+    if (options.onFit) options.onFit("base", step++, steps, parameterNames(job));
     FitBudget budget(options.timeBudget, fits);
     diagnosis.base = fitModel("base", job, modelJob(job, nullptr, {}, fitCounts), observations, fitCounts, outDir / "fits" / "base",
                               options.identify, budget.nextSearch(), baseSeries);
     budget.spend(diagnosis.base);
+    // Said at once, not after hours of candidates: a base cut short cannot be beaten fairly.
+    if (!diagnosis.base.searchCompleted())
+        warn("diagnose: the base fit was cut short (" + std::string(toString(*diagnosis.base.stop)) + ") after " +
+             std::to_string(diagnosis.base.evaluations) + " evaluations: no effect will be named unless its refit "
+             "completes (a larger --time-budget, or 0 to give each fit the job's own)");
+    if (measuresScatter && options.onFit) options.onFit("noise_floor", step++, steps, {});
+    diagnosis.noise = measureScatter(job, observations, fitCounts, diagnosis.base, std::max(0, options.scatterReplicas));
+    budget.spend(diagnosis.noise);
     json candidatesDoc = json::array();
     std::vector<json> candidateSeries;
     std::vector<Candidate> fitted;                 // each candidate as it was fitted
@@ -202,7 +216,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         if (options.onFit) {
             std::vector<std::string> names;
             for (const json& p : parameters) names.push_back(p.at("name").get<std::string>());
-            options.onFit(effect.name, static_cast<int>(c + 1), fits, names);
+            options.onFit(effect.name, step++, steps, names);
         }
         // The base fit's values in every run's scene, where the effect's model takes its K from.
         Job base = job;
@@ -224,11 +238,6 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         candidateSeries.push_back(series);
     }
 
-    json warnings = json::array();
-    const auto warn = [&](const std::string& line) {
-        warnings.push_back(line);
-        if (options.identify.onWarning) options.identify.onWarning(line);
-    };
     const auto beats = [](const ModelFit& fit, const ModelFit& base) {
         return fit.heldOutE < (1 - kHeldOutGain) * base.heldOutE && fit.bic < base.bic;
     };
@@ -250,7 +259,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         json parameters = json::array();
         for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], start[i]));
         const std::vector<std::string> names = parameterNames(job);
-        if (options.onFit) options.onFit("base_refit", fits, fits + 1, names);
+        if (options.onFit) options.onFit("base_refit", step++, steps + 1, names);
         IdentifyOptions identifyOptions = options.identify;
         identifyOptions.knownPoint = diagnosis.base.theta;
         json series;
@@ -274,25 +283,38 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                      {"unused_fit", toJson(refit, series, replaces ? "base" : "base_refit")}};
     }
     const ModelFit& base = diagnosis.base;
+    std::vector<Judged> judged;
     for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
         const ModelFit& fit = diagnosis.candidates[c];
-        const bool better = beats(fit, base);
         const bool vanishes = effectVanishes(fit, fitted[c], equivalents[c]);
-        const bool earns = better && !vanishes;
-        if (better && vanishes)
+        if (beats(fit, base) && vanishes)
             warn("diagnose: " + fit.model + " ended where its effect vanishes, as the base model, yet predicts the "
                  "held-out frames " + std::to_string(int(std::lround(100 * (1 - fit.heldOutE / base.heldOutE)))) +
                  " % better than the base fit: the base fit is not converged (more generations or time, or fewer "
                  "--effects to share them)");
-        if (earns && (!diagnosis.chosen || fit.heldOutE < diagnosis.candidates[*diagnosis.chosen].heldOutE))
-            diagnosis.chosen = c;
-        json entry = toJson(fit, candidateSeries[c], fit.model);
+        judged.push_back({&fit, candidates[c], vanishes});
+    }
+    const Conclusion conclusion = conclude(job, base, judged, diagnosis.noise);
+    diagnosis.verdict = conclusion.verdict;
+    diagnosis.chosen = conclusion.chosen;
+    for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
+        const CandidateVerdict& v = conclusion.candidates[c];
+        json entry = toJson(diagnosis.candidates[c], candidateSeries[c], diagnosis.candidates[c].model);
+        entry["title"] = candidates[c]->title;
         entry["description"] = candidates[c]->description;
         entry["source"] = candidates[c]->source;
-        entry["held_out_gain"] = base.heldOutE > 0 ? 1 - fit.heldOutE / base.heldOutE : 0.0;
-        entry["effect_vanishes"] = vanishes;
-        entry["earns_its_parameters"] = earns;
+        entry["held_out_gain"] = v.relativeGain;
+        entry["above_noise"] = v.aboveNoise;
+        entry["effect_vanishes"] = judged[c].vanishes;
+        entry["earns_its_parameters"] = v.earns;
         candidatesDoc.push_back(entry);
+    }
+    if (conclusion.verdict == Verdict::CannotTell) {
+        std::string tell;
+        for (const std::string& t : conclusion.whatWouldTell) tell += (tell.empty() ? "" : "; ") + t;
+        // diagnosis.json and the panel hold it as the conclusion itself.
+        if (options.identify.onWarning)
+            options.identify.onWarning("diagnose: " + conclusion.sentence + (tell.empty() ? "" : " (what would tell: " + tell + ")"));
     }
     // Each search makes its minimum generations whatever its share, so a diagnosis can end late: say
     // so, with what would take less.
@@ -301,6 +323,12 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                  std::to_string(std::lround(options.timeBudget)) +
              " s budget: each search makes at least " + std::to_string(job.fidelity.minFineGenerations) +
              " generations (a coarser grid, a shorter clip or fewer --effects take less)");
+    const NoiseFloor& noise = diagnosis.noise;
+    json noiseJson{{"held_out_E", noise.heldOutE},
+                   {"log_spread", noise.logSpread()},
+                   {"visible_share", noise.visibleShare()},
+                   {"deterministic", noise.deterministic},
+                   {"seconds", noise.seconds}};
     json notTried = json::array();
     for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
     const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
@@ -313,11 +341,15 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         {"version", 1},
         {"job", job.file.string()},
         {"chosen", diagnosis.chosen ? json(after.model) : json()},
-        {"conclusion", diagnosis.chosen ? "missing effect: " + after.model : std::string("no missing effect")},
+        {"verdict", toString(conclusion.verdict)},
+        {"conclusion", conclusion.sentence},
+        {"what_would_tell", conclusion.whatWouldTell},
         {"criterion", "fitted on each run's first " + std::to_string(int(std::lround(100 * options.fitShare))) +
                           " % of compared frames; an effect earns its parameters when its E over the held-out rest is "
                           "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +
-                          " % of the base's and its BIC over the fitted frames is below the base's"},
+                          " % of the base's, its gain exceeds the share the noise floor explains (visible_share), its "
+                          "BIC over the fitted frames is below the base's, and the base fit's search was not cut short"},
+        {"noise_floor", noiseJson},
         {"fitted_frames", fitCounts},
         {"time_budget_s", options.timeBudget},
         {"seconds", budget.spent()},
@@ -331,4 +363,4 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     return diagnosis;
 }
 
-}  // namespace viscoscope::identify
+}  // namespace viscoscope::diagnose

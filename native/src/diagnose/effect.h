@@ -46,6 +46,7 @@ using StartCurve = std::function<std::vector<double>(double)>;
 
 struct Effect {
     std::string name;         // as diagnosis.json and --effects name it
+    std::string title;        // in words, as a conclusion names it ("shear thinning")
     std::string description;  // what it adds, one line
     std::string source;       // the law's paper or the reason to suspect it, one line
     // A material law in place of the Newtonian η, given η (its consistency K, with the law at its

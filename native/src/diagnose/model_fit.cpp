@@ -108,10 +108,13 @@ double partE(const Job& run, const Observation& obs, const Evaluation& ev, const
 }
 
 // θ scored over every frame of `run`, on each of its grid placements (E their mean), whatever its
-// search took, so that every model is scored alike.
-RunScore scoreRun(Job run, const Observation& obs, const std::vector<double>& theta, int fitCount) {
+// search took, so that every model is scored alike; a replica moves the placements by `gridShift`
+// cells and seeds the particles with the scene's seed + `seedOffset`.
+RunScore scoreRun(Job run, const Observation& obs, const std::vector<double>& theta, int fitCount,
+                  double gridShift = 0, unsigned seedOffset = 0) {
     run.placementSchedule = PlacementSchedule::EachEvaluation;
-    const Evaluation ev = evaluate(run, obs, theta, run.resolution);
+    run.scene.seed += seedOffset;
+    const Evaluation ev = evaluate(run, obs, theta, run.resolution, {}, gridShift);
     const std::vector<size_t> frames = comparedFrames(obs);
     const std::vector<size_t> fitted(frames.begin(), frames.begin() + fitCount), heldOut(frames.begin() + fitCount, frames.end());
     RunScore score;
@@ -145,6 +148,8 @@ void FitBudget::spend(const ModelFit& fit) {
     lastScoring_ = fit.scoringSeconds;
     --fitsLeft_;
 }
+
+void FitBudget::spend(const NoiseFloor& noise) { spent_ += noise.seconds; }
 
 ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const std::vector<Observation>& observations,
                   const std::vector<int>& fitCounts, const fs::path& dir, IdentifyOptions identifyOptions,
@@ -185,6 +190,30 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
     const double n = fittedFrames, k = double(fit.theta.size());
     fit.bic = n * std::log(std::max(fit.fittedE, 1e-300) / n) + k * std::log(n);
     return fit;
+}
+
+bool ModelFit::searchCompleted() const {
+    return !stop || (*stop != StopReason::TimeBudget && *stop != StopReason::Cancelled);
+}
+
+NoiseFloor measureScatter(const Job& full, const std::vector<Observation>& observations,
+                          const std::vector<int>& fitCounts, const ModelFit& fit, int replicas) {
+    NoiseFloor noise;
+    noise.heldOutE.push_back(fit.heldOutE);
+    noise.deterministic = full.forwardModel == ForwardModel::ThinFilm;
+    if (noise.deterministic) return noise;
+    const auto start = std::chrono::steady_clock::now();
+    const std::vector<Job> runs = runsOf(full);
+    for (int k = 1; k <= replicas; ++k) {
+        // Between the scoring's placements, k/(replicas + 1) of their spacing on.
+        const double shift = double(k) / ((replicas + 1) * full.gridPlacements);
+        double heldOut = 0;
+        for (size_t r = 0; r < runs.size(); ++r)
+            heldOut += scoreRun(runs[r], observations[r], fit.theta, fitCounts[r], shift, unsigned(k)).heldOut;
+        noise.heldOutE.push_back(heldOut);
+    }
+    noise.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return noise;
 }
 
 json toJson(const ModelFit& fit, const json& series, const std::string& folder) {

@@ -38,6 +38,7 @@ class FitBudget {
     // would mean none: an overspent budget still runs the minimum generations (and diagnose warns).
     double nextSearch() const;
     void spend(const ModelFit& fit);
+    void spend(const NoiseFloor& noise);
     double spent() const { return spent_; }
 
   private:
@@ -52,6 +53,12 @@ ModelFit fitModel(const std::string& model, const identify::Job& full, identify:
                   const std::vector<identify::Observation>& observations, const std::vector<int>& fitCounts,
                   const std::filesystem::path& dir, identify::IdentifyOptions identifyOptions, double searchBudget,
                   nlohmann::json& runSeries);
+
+// The noise floor at `fit`'s θ* (scored already: its held-out E is the first sample): each of
+// `replicas` scores every run again on grid placements moved between the scoring's and on
+// another particle seed.
+NoiseFloor measureScatter(const identify::Job& full, const std::vector<identify::Observation>& observations,
+                          const std::vector<int>& fitCounts, const ModelFit& fit, int replicas);
 
 // A fit as diagnosis.json holds it; `folder` is its folder under OUT/fits.
 nlohmann::json toJson(const ModelFit& fit, const nlohmann::json& series, const std::string& folder);

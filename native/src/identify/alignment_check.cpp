@@ -1,8 +1,10 @@
 // The alignment check. The grid resolves a scene's small features unevenly: where the faces fall
-// against the rim of a hole a few cells wide decides how much of it passes flux, and so the drain.
-// That error is the discretization's, not the fit's, and the profile band does not see it. So θ*
-// and kAlignmentStep·θ* are scored again on the grid moved by half a cell along x and y, and with
-// the profile's curvature c the minimum there is u_s = ((u₁² − u₂²) − (E₁ − E₂)/c) / (2 (u₁ − u₂)).
+// against the rim of a hole a few cells wide decides how much of it passes flux, and so the drain;
+// and where the seeded particles fall moves the liquid's surface by a fraction of a cell. That
+// scatter is the forward model's, not the fit's, and the profile band sees only the part the
+// search's own draws show. So θ* and kAlignmentStep·θ* are scored again on the grid moved by half a
+// cell along x and y with the particles seeded anew, and with the profile's curvature c the
+// minimum there is u_s = ((u₁² − u₂²) − (E₁ − E₂)/c) / (2 (u₁ − u₂)).
 // The profile of CMA-ES's spread-out samples is flatter than the landscape (E is more V than
 // parabola near its minimum), so the widening errs wide. One other alignment is a sample of the
 // error, not its sign: the interval is widened to θ*·exp(±|ln(θ_s/θ*)|). The sample cup's figures
@@ -19,6 +21,8 @@ namespace {
 // grids midway between the search's.
 constexpr double kAlignmentShift = 0.5;
 constexpr double kAlignmentStep = 1.15;
+// Added to the particle seed: the check's draw of the seeding is not the search's.
+constexpr unsigned kAlignmentSeedOffset = 1;
 
 std::optional<double> shiftedMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
                                      const std::array<double, 2>& E) {
@@ -38,7 +42,7 @@ AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Obse
     AlignmentOutcome outcome;
     const double shift = kAlignmentShift / job.gridPlacements;
     json& check = outcome.entry;
-    check = {{"grid_shift_cells", {shift, shift, 0.0}}};
+    check = {{"grid_shift_cells", {shift, shift, 0.0}}, {"seed_offset", kAlignmentSeedOffset}};
     const std::array<double, 2> thetas{thetaStar, kAlignmentStep * thetaStar};
     // A rerun of a finished job (or one killed after the check) takes the scores from the
     // checkpoint instead of simulating them again.
@@ -59,7 +63,7 @@ AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Obse
     if (!cached) {
         const auto start = Clock::now();
         const BatchResult ran =
-            pool.evaluate(job, observations, {{{thetas[0]}, {thetas[1]}}, false, job.resolution, shift, {}});
+            pool.evaluate(job, observations, {{{thetas[0]}, {thetas[1]}}, false, job.resolution, shift, {}, kAlignmentSeedOffset});
         outcome.seconds = std::chrono::duration<double>(Clock::now() - start).count();
         check["seconds"] = outcome.seconds;
         state.alignment = AlignmentScores{thetas, {ran.evaluations[0].E, ran.evaluations[1].E}, ran.errors};

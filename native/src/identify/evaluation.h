@@ -134,6 +134,7 @@ struct EvaluationBatch {
     int resolution = 0;
     double gridShift = 0;
     std::vector<std::filesystem::path> fieldsDirs;  // per θ (empty path: no fields); empty: none
+    unsigned seedOffset = 0;  // added to every run's particle seed: another draw of the seeding
     nlohmann::json toJson() const;
     static EvaluationBatch fromJson(const nlohmann::json& doc);
 };

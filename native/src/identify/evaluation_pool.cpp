@@ -75,7 +75,7 @@ json EvaluationBatch::toJson() const {
     json dirs = json::array();
     for (const fs::path& dir : fieldsDirs) dirs.push_back(dir.string());
     return {{"thetas", thetas}, {"coarse", coarse}, {"resolution", resolution}, {"grid_shift", gridShift},
-            {"fields_dirs", dirs}};
+            {"fields_dirs", dirs}, {"seed_offset", seedOffset}};
 }
 
 EvaluationBatch EvaluationBatch::fromJson(const json& doc) {
@@ -85,6 +85,7 @@ EvaluationBatch EvaluationBatch::fromJson(const json& doc) {
     batch.resolution = doc.at("resolution").get<int>();
     batch.gridShift = doc.at("grid_shift").get<double>();
     for (const json& dir : doc.at("fields_dirs")) batch.fieldsDirs.emplace_back(dir.get<std::string>());
+    batch.seedOffset = doc.at("seed_offset").get<unsigned>();
     return batch;
 }
 
@@ -111,8 +112,15 @@ ThreadPool::~ThreadPool() = default;
 
 int ThreadPool::concurrency() const { return threads_->arena->max_concurrency(); }
 
-BatchResult ThreadPool::evaluate(const Job& job, const Observations& observations, const EvaluationBatch& batch) {
+BatchResult ThreadPool::evaluate(const Job& asked, const Observations& observations, const EvaluationBatch& batch) {
     const Observation& observation = batch.coarse ? observations.coarse : observations.full;
+    Job reseeded;
+    if (batch.seedOffset != 0) {
+        reseeded = asked;
+        reseeded.scene.seed += batch.seedOffset;
+        for (Job& run : reseeded.otherRuns) run.scene.seed += batch.seedOffset;
+    }
+    const Job& job = batch.seedOffset != 0 ? reseeded : asked;
     const int count = static_cast<int>(batch.thetas.size());
     BatchResult result;
     result.evaluations.resize(count);

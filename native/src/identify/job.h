@@ -134,9 +134,9 @@ struct Job {
     // building the level set dominates.
     bool exactSilhouettes = true;
     SilhouetteComparison silhouetteComparison = kDefaultSilhouetteComparison;
-    // After the search, θ* is scored again on the grid moved by half a cell along x and y, which
-    // moves the simulation's discretization against the scene and nothing else, and the interval
-    // is widened by how far that moves the minimum (see alignment_check.cpp).
+    // After the search, θ* is scored again on the grid moved by half a cell along x and y, with
+    // the particles seeded anew, and the interval is widened by how far that moves the minimum
+    // (see alignment_check.cpp).
     bool alignmentCheck = true;
     // E is scored on this many placements of the grid, moved by k/n cells along x and y
     // (k = 0 … n − 1). Where a small feature sits against the faces then matters less: on the

@@ -60,6 +60,7 @@ StartCurve ridge(const nlohmann::json& parameters, const BaseFit& base) {
 Effect shearThinning() {
     Effect effect;
     effect.name = "shear_thinning";
+    effect.title = "shear thinning";
     effect.description = "power law η = K γ̇^(n−1), n ≤ 1, in place of η: K and n searched";
     effect.source = "Ostwald–de Waele power law; a gravity current spreads as t^{n/(3n+5)} (DESIGN.md)";
     effect.law = [](double eta) -> MaterialModel { return PowerLaw{eta, 1.0}; };

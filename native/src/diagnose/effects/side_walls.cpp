@@ -35,6 +35,7 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
 Effect sideWalls() {
     Effect effect;
     effect.name = "side_walls";
+    effect.title = "side walls nearer than the scene's";
     effect.description = "the width of the scene's channel searched beside the base's parameters";
     effect.source = "geometry the footage does not show: a channel's side walls slow the flow at every time";
     effect.parameters = parameters;

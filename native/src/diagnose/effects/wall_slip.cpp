@@ -17,6 +17,7 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
 Effect wallSlip() {
     Effect effect;
     effect.name = "wall_slip";
+    effect.title = "wall slip";
     effect.description = "Navier slip at solid walls: the slip length searched beside the base's parameters";
     effect.source = "Navier 1823; the film check in sim_physics_test";
     effect.parameters = parameters;

@@ -62,6 +62,7 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
 Effect yieldStress() {
     Effect effect;
     effect.name = "yield_stress";
+    effect.title = "a yield stress";
     effect.description = "Bingham liquid (Herschel–Bulkley with n = 1) in place of η: τ_y and K searched";
     effect.source = "Herschel & Bulkley 1926; the arrest radius of Roussel & Coussot 2005";
     effect.law = [](double eta) -> MaterialModel { return HerschelBulkley{0.0, eta, 1.0}; };

@@ -1,0 +1,153 @@
+// The three conclusions (conclusion.h).
+#include "diagnose/conclusion.h"
+
+#include <boost/math/distributions/students_t.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+namespace viscoscope::diagnose {
+
+using namespace identify;
+
+namespace {
+
+// The one-sided confidence a named gain stands above the scatter with.
+constexpr double kGainConfidence = 0.95;
+
+std::string percent(double share) { return std::to_string(std::lround(100 * share)) + " %"; }
+
+std::string joined(const std::vector<std::string>& items) {
+    std::string all;
+    for (size_t i = 0; i < items.size(); ++i) all += (i == 0 ? "" : i + 1 == items.size() ? " and " : ", ") + items[i];
+    return all;
+}
+
+// How the scatter was measured, for the conclusion's sentence.
+std::string scatterPhrase(const NoiseFloor& noise) {
+    if (noise.deterministic) return "the forward model is deterministic: no scatter";
+    return "the simulation's own scatter, over " + std::to_string(noise.heldOutE.size()) +
+           " seeds and grid placements, explains gains up to " + percent(noise.visibleShare());
+}
+
+// What shrinks the scatter against the effect: a finer grid, more placements averaged, more data.
+std::vector<std::string> lessScatter(const Job& job) {
+    std::vector<std::string> tell{"a finer grid (resolution " + std::to_string(job.resolution) + " → " +
+                                      std::to_string(int(std::lround(1.5 * job.resolution))) + ")",
+                                  "more grid placements averaged (grid_placements " + std::to_string(job.gridPlacements) +
+                                      " → " + std::to_string(2 * job.gridPlacements) + ")"};
+    tell.push_back(job.otherRuns.empty() ? "a second run of the same liquid in another geometry (\"runs\")"
+                                         : "a longer clip of each run");
+    return tell;
+}
+
+std::string moreTime(const ModelFit& base) {
+    return base.timeBudget > 0 ? "more time for each fit (a larger --time-budget, or 0 to give each fit the job's own)"
+                               : "more generations for each fit (max_generations, time_budget_s)";
+}
+
+void addOnce(std::vector<std::string>& list, const std::vector<std::string>& items) {
+    for (const std::string& item : items)
+        if (std::find(list.begin(), list.end(), item) == list.end()) list.push_back(item);
+}
+
+}  // namespace
+
+double NoiseFloor::logSpread() const {
+    const size_t m = heldOutE.size();
+    if (m < 2) return 0;
+    std::vector<double> logs;
+    for (double e : heldOutE) logs.push_back(std::log(std::max(e, 1e-300)));
+    const double mean = std::accumulate(logs.begin(), logs.end(), 0.0) / m;
+    double squares = 0;
+    for (double l : logs) squares += (l - mean) * (l - mean);
+    return std::sqrt(squares / (m - 1));
+}
+
+double NoiseFloor::visibleShare() const {
+    if (deterministic) return 0;
+    if (heldOutE.size() < 2) return 1;
+    const boost::math::students_t t(double(heldOutE.size() - 1));
+    return -std::expm1(-boost::math::quantile(t, kGainConfidence) * std::sqrt(2.0) * logSpread());
+}
+
+const char* toString(Verdict verdict) {
+    switch (verdict) {
+        case Verdict::MissingEffect: return "missing_effect";
+        case Verdict::NoMissingEffect: return "no_missing_effect";
+        case Verdict::CannotTell: return "cannot_tell";
+    }
+    return "?";
+}
+
+Conclusion conclude(const Job& job, const ModelFit& base, const std::vector<Judged>& candidates, const NoiseFloor& noise) {
+    Conclusion conclusion;
+    const double visible = noise.visibleShare();
+    std::optional<size_t> best;
+    std::vector<std::string> withinScatter, cutShort;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+        const ModelFit& fit = *candidates[c].fit;
+        CandidateVerdict& v = conclusion.candidates.emplace_back();
+        v.gain = base.heldOutE - fit.heldOutE;
+        v.relativeGain = base.heldOutE > 0 ? v.gain / base.heldOutE : 0.0;
+        v.aboveNoise = v.relativeGain > visible;
+        const bool predictsBetter = v.relativeGain > kHeldOutGain && fit.bic < base.bic && !candidates[c].vanishes;
+        v.earns = predictsBetter && v.aboveNoise;
+        if (v.earns && (!best || fit.heldOutE < candidates[*best].fit->heldOutE)) best = c;
+        if (predictsBetter && !v.aboveNoise)
+            withinScatter.push_back(candidates[c].effect->title + " predicts the held-out frames " + percent(v.relativeGain) +
+                                    " better, within the scatter");
+        if (!fit.searchCompleted()) cutShort.push_back(fit.model);
+    }
+    const std::string scatter = scatterPhrase(noise);
+    if (best && base.searchCompleted()) {
+        const Judged& named = candidates[*best];
+        conclusion.verdict = Verdict::MissingEffect;
+        conclusion.chosen = best;
+        conclusion.sentence = "missing effect: " + named.effect->title + " (" + named.effect->name +
+                              "): it predicts the held-out frames " + percent(conclusion.candidates[*best].relativeGain) +
+                              " better than the base fit, and " + scatter;
+        return conclusion;
+    }
+    std::vector<std::string> why;
+    if (candidates.empty()) {
+        why.push_back("no effect could be tried on this job (not_tried says why)");
+    }
+    if (best) {
+        why.push_back(candidates[*best].effect->title + " predicts the held-out frames " +
+                      percent(conclusion.candidates[*best].relativeGain) + " better, but the base fit was cut short (" +
+                      (base.stop ? toString(*base.stop) : "?") + "), and the gain may be its shortfall");
+        addOnce(conclusion.whatWouldTell, {moreTime(base)});
+    }
+    if (!withinScatter.empty()) {
+        why.push_back(joined(withinScatter));
+        addOnce(conclusion.whatWouldTell, lessScatter(job));
+    }
+    if (!(visible <= kHeldOutGain)) {
+        why.push_back(noise.heldOutE.size() < 2 ? std::string("the simulation's scatter was not measured")
+                                                : scatter + ", more than the " + percent(kHeldOutGain) + " an effect must show");
+        addOnce(conclusion.whatWouldTell, lessScatter(job));
+    }
+    if (!base.searchCompleted()) cutShort.insert(cutShort.begin(), "base");
+    if (!cutShort.empty() && !best) {
+        why.push_back("the fits of " + joined(cutShort) + " were cut short by the time budget");
+        addOnce(conclusion.whatWouldTell, {moreTime(base)});
+    }
+    if (!why.empty()) {
+        conclusion.verdict = Verdict::CannotTell;
+        std::string reasons;
+        for (const std::string& reason : why) reasons += (reasons.empty() ? "" : "; ") + reason;
+        conclusion.sentence = "cannot tell at this grid and budget: " + reasons;
+        return conclusion;
+    }
+    std::vector<std::string> tried;
+    for (const Judged& j : candidates) tried.push_back(j.effect->title);
+    conclusion.verdict = Verdict::NoMissingEffect;
+    conclusion.sentence = "no missing effect: " +
+                          (tried.size() == 1 ? tried[0] + " does not predict" : "none of " + joined(tried) + " predicts") +
+                          " the held-out frames " + percent(kHeldOutGain) + " better than the base fit, and " + scatter;
+    return conclusion;
+}
+
+}  // namespace viscoscope::diagnose

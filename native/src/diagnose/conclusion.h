@@ -1,0 +1,50 @@
+// A diagnosis's conclusion, one of three said plainly: a missing effect, named because its fit
+// predicts the held-out frames better than the base by more than the forward model's own scatter
+// explains; no missing effect, where a gain of that size would have shown and none did; or cannot
+// tell, with what would tell. Private to the stage.
+#pragma once
+
+#include "diagnose/diagnose.h"
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace viscoscope::diagnose {
+
+// The held-out gain a candidate must make over the base, as a share of the base's held-out E, for
+// the diagnosis to name it; and the gain that must be visible above the scatter for "no missing
+// effect" to mean the data could have shown one.
+constexpr double kHeldOutGain = 0.2;
+
+// One candidate as the conclusion weighs it.
+struct Judged {
+    const ModelFit* fit = nullptr;
+    const Effect* effect = nullptr;
+    bool vanishes = false;  // it ended where its effect vanishes: the base model
+};
+
+// What the conclusion found of each candidate, in the order given.
+struct CandidateVerdict {
+    double gain = 0;          // the base's held-out E less the candidate's
+    double relativeGain = 0;  // gain over the base's held-out E
+    bool aboveNoise = false;  // relativeGain > NoiseFloor::visibleShare()
+    bool earns = false;       // named if the base converged: above the noise, kHeldOutGain, BIC, not vanished
+};
+
+struct Conclusion {
+    Verdict verdict = Verdict::CannotTell;
+    std::optional<size_t> chosen;             // into the candidates, with MissingEffect
+    std::string sentence;                     // the conclusion in words
+    std::vector<std::string> whatWouldTell;   // with CannotTell: what would decide it
+    std::vector<CandidateVerdict> candidates;
+};
+
+// `base` and `candidates` fitted and scored alike, `noise` measured at the base's θ*; `job` for
+// what would tell (its grid, placements and runs).
+Conclusion conclude(const identify::Job& job, const ModelFit& base, const std::vector<Judged>& candidates,
+                    const NoiseFloor& noise);
+
+}  // namespace viscoscope::diagnose

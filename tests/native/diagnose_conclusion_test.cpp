@@ -1,0 +1,137 @@
+// The conclusion's rules (diagnose/conclusion.h), one case each: fits as diagnose scores them, with
+// the noise floor a forward model of known scatter gives.
+#include "diagnose/conclusion.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace {
+
+using namespace viscoscope;
+using diagnose::Verdict;
+
+diagnose::ModelFit fitOf(const std::string& model, double heldOutE, double bic,
+                         std::optional<identify::StopReason> stop = identify::StopReason::ToleranceFun) {
+    diagnose::ModelFit fit;
+    fit.model = model;
+    fit.heldOutE = heldOutE;
+    fit.bic = bic;
+    fit.stop = stop;
+    return fit;
+}
+
+diagnose::Effect effectOf(const std::string& name, const std::string& title) {
+    diagnose::Effect effect;
+    effect.name = name;
+    effect.title = title;
+    return effect;
+}
+
+// Three scorings of the base's θ* about 0.10, each `factor` from the next: a factor 1.01 lets gains
+// over 4 % show, 1.1 only those over 33 %.
+diagnose::NoiseFloor scatteredBy(double factor) { return {{0.10 / factor, 0.10, 0.10 * factor}, false, 0}; }
+
+bool mentions(const std::vector<std::string>& lines, const std::string& part) {
+    for (const std::string& line : lines)
+        if (line.find(part) != std::string::npos) return true;
+    return false;
+}
+
+class Conclusion : public ::testing::Test {
+protected:
+    Conclusion() {
+        job_.resolution = 48;
+        job_.gridPlacements = 2;
+    }
+    diagnose::Conclusion conclude(const diagnose::ModelFit& base, const std::vector<diagnose::ModelFit>& fits,
+                                  const diagnose::NoiseFloor& noise, const std::vector<bool>& vanishes = {}) {
+        std::vector<diagnose::Judged> judged;
+        for (size_t i = 0; i < fits.size(); ++i)
+            judged.push_back({&fits[i], &effects_[i % effects_.size()], i < vanishes.size() && vanishes[i]});
+        return diagnose::conclude(job_, base, judged, noise);
+    }
+    identify::Job job_;
+    std::vector<diagnose::Effect> effects_{effectOf("shear_thinning", "shear thinning"), effectOf("wall_slip", "wall slip")};
+};
+
+TEST(NoiseFloor, GainVisibleAboveTheScatter) {
+    EXPECT_EQ(diagnose::NoiseFloor({{0.1}, true, 0}).visibleShare(), 0.0);
+    EXPECT_EQ(diagnose::NoiseFloor({{0.1}, false, 0}).visibleShare(), 1.0);
+    const diagnose::NoiseFloor three{{std::exp(-1.0), 1, std::exp(1.0)}, false, 0};
+    EXPECT_NEAR(three.logSpread(), 1.0, 1e-12);
+    // t(0.95, 2 degrees of freedom) = 2.919986 (any table of Student's t), times √2, in ln E.
+    EXPECT_NEAR(three.visibleShare(), 1 - std::exp(-2.919986 * std::sqrt(2.0)), 1e-6);
+}
+
+TEST_F(Conclusion, NamesAnEffectWhoseGainStandsAboveTheScatter) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70), fitOf("wall_slip", 0.07, -60)}, scatteredBy(1.01));
+    EXPECT_EQ(c.verdict, Verdict::MissingEffect);
+    ASSERT_TRUE(c.chosen.has_value());
+    EXPECT_EQ(*c.chosen, 0u);
+    EXPECT_NE(c.sentence.find("shear thinning"), std::string::npos) << c.sentence;
+    // Both earn their parameters; the one that predicts best is named.
+    EXPECT_TRUE(c.candidates[0].earns);
+    EXPECT_TRUE(c.candidates[1].earns);
+}
+
+TEST_F(Conclusion, CannotTellAGainWithinTheScatter) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.07, -55)}, scatteredBy(1.1));
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_FALSE(c.chosen.has_value());
+    EXPECT_FALSE(c.candidates[0].aboveNoise);
+    EXPECT_TRUE(mentions(c.whatWouldTell, "finer grid (resolution 48 → 72)")) << c.sentence;
+    EXPECT_TRUE(mentions(c.whatWouldTell, "grid_placements 2 → 4"));
+}
+
+TEST_F(Conclusion, FindsNoMissingEffectWhereOneWouldHaveShown) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.095, -49), fitOf("wall_slip", 0.11, -48)}, scatteredBy(1.01));
+    EXPECT_EQ(c.verdict, Verdict::NoMissingEffect) << c.sentence;
+    EXPECT_TRUE(c.whatWouldTell.empty());
+}
+
+TEST_F(Conclusion, CannotTellWhereTheScatterWouldHideAnEffect) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.095, -49)}, scatteredBy(1.1));
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_NE(c.sentence.find("scatter"), std::string::npos) << c.sentence;
+    EXPECT_FALSE(c.whatWouldTell.empty());
+    // Unmeasured, it is no better than large.
+    EXPECT_EQ(conclude(base, {fitOf("shear_thinning", 0.095, -49)}, {{0.10}, false, 0}).verdict, Verdict::CannotTell);
+}
+
+TEST_F(Conclusion, NamesNothingAgainstABaseCutShort) {
+    diagnose::ModelFit base = fitOf("base", 0.10, -50, identify::StopReason::TimeBudget);
+    base.timeBudget = 60;  // its share of the diagnosis's --time-budget
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70)}, scatteredBy(1.01));
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_TRUE(c.candidates[0].earns);
+    EXPECT_TRUE(mentions(c.whatWouldTell, "time-budget")) << c.sentence;
+}
+
+TEST_F(Conclusion, CannotTellWhileACandidateWasCutShort) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.095, -49, identify::StopReason::TimeBudget)}, scatteredBy(1.01));
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_NE(c.sentence.find("shear_thinning"), std::string::npos) << c.sentence;
+}
+
+TEST_F(Conclusion, NamesNoEffectThatEndedAsTheBase) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70)}, scatteredBy(1.01), {true});
+    EXPECT_NE(c.verdict, Verdict::MissingEffect) << c.sentence;
+    EXPECT_FALSE(c.candidates[0].earns);
+}
+
+TEST_F(Conclusion, ADeterministicModelNeedsOnlyTheGain) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const diagnose::NoiseFloor exact{{0.10}, true, 0};
+    EXPECT_EQ(conclude(base, {fitOf("shear_thinning", 0.07, -55)}, exact).verdict, Verdict::MissingEffect);
+    EXPECT_EQ(conclude(base, {fitOf("shear_thinning", 0.09, -55)}, exact).verdict, Verdict::NoMissingEffect);
+    EXPECT_EQ(conclude(base, {}, exact).verdict, Verdict::CannotTell);
+}
+
+}  // namespace
