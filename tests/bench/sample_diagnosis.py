@@ -10,7 +10,7 @@ within 30 minutes on a 2-core machine).
    footage, η searched from 5 Pa·s, seed 3) at `--resolution`, with `--time-budget` for the whole
    diagnosis: the Newtonian base and each candidate the cup can hold.
 3. Prints the diagnosis's wall time against the budget, and each fit's parameters, evaluations,
-   search and scoring seconds, held-out E and BIC, and the conclusion.
+   search and scoring seconds, held-out E and BIC, the noise floor and the conclusion.
 
     /usr/bin/python3 tests/bench/sample_diagnosis.py [--budget 1800] [--resolution 48] [--hidden JSON]
         [--effects a,b] [--work DIR] [--reuse-clip] [--threads N]
@@ -92,8 +92,14 @@ def main():
               f"held-out E {other['held_out_E']:.4g})")
     for skipped in report["not_tried"]:
         print(f"  not tried: {skipped['effect']} ({skipped['why']})")
-    print(f"conclusion: {report['conclusion']}; E before {report['errors']['E']['before']:.4g}, "
+    noise = report["noise_floor"]
+    print(f"noise floor: held-out E of the base's θ* over {len(noise['held_out_E'])} seeds and placements "
+          f"{', '.join('%.4g' % e for e in noise['held_out_E'])}; ln E spread {noise['log_spread']:.3f}, "
+          f"gains under {100 * noise['visible_share']:.0f} % within it ({noise['seconds']:.0f} s)")
+    print(f"{report['verdict']}: {report['conclusion']}; E before {report['errors']['E']['before']:.4g}, "
           f"after {report['errors']['E']['after']:.4g}")
+    for line in report["what_would_tell"]:
+        print(f"  what would tell: {line}")
 
 
 if __name__ == "__main__":

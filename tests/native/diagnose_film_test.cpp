@@ -221,18 +221,25 @@ TEST(FilmDiagnosis, RefitsAnUnconvergedBaseBeforeNamingAnEffect) {
     fs::remove_all(dir);
 }
 
+// DIR/job.json: the radius of a film of η = 50 Pa·s with a slip length of 3 mm, η fixed at the truth
+// (an independent reading, a viscometer's) and nothing searched.
+constexpr double kFixedEta = 50, kHiddenSlip = 0.003;
+void writeFixedViscosityJob(const fs::path& dir) {
+    fs::create_directories(dir);
+    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", kFixedEta}, {"slip_length", kHiddenSlip}});
+    json job = radiusJob();
+    job.erase("parameters");
+    job["fixed"] = {{{"name", "viscosity"}, {"value", kFixedEta}, {"uncertainty", 1.0}}};
+    std::ofstream(dir / "job.json") << job.dump();
+}
+
 // With η fixed at an independent reading (a viscometer's), the slip the radius alone hides shows:
 // the film spreads faster than that η allows, and only slip explains it. identify refuses such a job
 // (nothing to search); diagnose holds the base at the fixed value and fits the slip length alone.
 TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
     const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_fixed_" + std::to_string(::getpid()));
-    fs::create_directories(dir);
-    const double eta = 50, slip = 0.003;
-    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}});
-    json job = radiusJob();
-    job.erase("parameters");
-    job["fixed"] = {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}};
-    std::ofstream(dir / "job.json") << job.dump();
+    writeFixedViscosityJob(dir);
+    const double eta = kFixedEta, slip = kHiddenSlip;
     const identify::Job parsed = identify::loadJob(dir / "job.json");
     EXPECT_THROW(identify::identify(parsed, dir / "identify"), InputError);
     const diagnose::Diagnosis d = diagnose::diagnose(parsed, dir / "out");
@@ -255,13 +262,8 @@ TEST(FilmDiagnosis, WithTheViscosityFixedItNamesHiddenSlip) {
 // given, as it does the engine's own (with η fixed, as above, so that slip alone explains the film).
 TEST(FilmDiagnosis, TakesANewEffectAsARecord) {
     const fs::path dir = fs::temp_directory_path() / ("viscoscope_film_record_" + std::to_string(::getpid()));
-    fs::create_directories(dir);
-    const double eta = 50, slip = 0.003;
-    writeRecordAndScene(dir, {{"density", 1000}, {"viscosity", eta}, {"slip_length", slip}});
-    json job = radiusJob();
-    job.erase("parameters");
-    job["fixed"] = {{{"name", "viscosity"}, {"value", eta}, {"uncertainty", 1.0}}};
-    std::ofstream(dir / "job.json") << job.dump();
+    writeFixedViscosityJob(dir);
+    const double slip = kHiddenSlip;
     diagnose::Effect toy;
     toy.name = "toy_slip";
     toy.title = "toy slip";

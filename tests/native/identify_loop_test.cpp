@@ -374,6 +374,8 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     EXPECT_EQ(warned[0].rfind("time_budget_s: the 2 full-fidelity generations", 0), 0u) << warned[0];
     EXPECT_EQ(warned[1].rfind("alignment_check: skipped", 0), 0u) << warned[1];
     EXPECT_TRUE(result.document.at("viscosity").at("alignment_check").contains("skipped"));
+    // Without it the interval leaves out the grid's share: the result is doubted.
+    EXPECT_EQ(result.document.at("doubts"), json::array({warned[1]}));
     EXPECT_EQ(budgetWarnings(result.document.at("warnings")), 1);
     // After the switch the estimate covers the full-fidelity generation still to come, not the
     // budget's spent remainder; at the end, the alignment check's two evaluations.

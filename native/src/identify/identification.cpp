@@ -426,8 +426,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         if (alignmentPlanned) {
             estimate.alignment =
                 alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, budget, save);
+            // Skipped for the budget, the interval leaves out the grid's share: the result is doubted.
             if (const std::optional<std::string>& warning = estimate.alignment->warning) {
-                warnings.push_back(*warning);
+                doubts.push_back(*warning);
                 warn(*warning);
             }
         }
