@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 engine_packages=(build-essential cmake pkg-config libeigen3-dev libsuitesparse-dev libopenvdb-dev
-  libboost-iostreams-dev libopencv-dev libtbb-dev nlohmann-json3-dev libcli11-dev
+  libboost-dev libboost-iostreams-dev libopencv-dev libtbb-dev nlohmann-json3-dev libcli11-dev
   ffmpeg mpi-default-dev)
 sample_packages=(blender python3-matplotlib)
 build_test_packages=(libgtest-dev libbenchmark-dev libnlopt-cxx-dev)
