@@ -110,10 +110,10 @@ double partE(const Job& run, const Observation& obs, const Evaluation& ev, const
 // θ scored over every frame of `run`, on each of its grid placements (E their mean), whatever its
 // search took, so that every model is scored alike; a replica moves the placements by `gridShift`
 // cells and seeds the particles with the scene's seed + `seedOffset`.
-RunScore scoreRun(Job run, const Observation& obs, const std::vector<double>& theta, int fitCount,
+RunScore scoreRun(const Job& asked, const Observation& obs, const std::vector<double>& theta, int fitCount,
                   double gridShift = 0, unsigned seedOffset = 0) {
+    Job run = reseeded(asked, seedOffset);
     run.placementSchedule = PlacementSchedule::EachEvaluation;
-    run.scene.seed += seedOffset;
     const Evaluation ev = evaluate(run, obs, theta, run.resolution, {}, gridShift);
     const std::vector<size_t> frames = comparedFrames(obs);
     const std::vector<size_t> fitted(frames.begin(), frames.begin() + fitCount), heldOut(frames.begin() + fitCount, frames.end());

@@ -271,6 +271,12 @@ Observation firstPartOf(const Observation& observation, double share) {
     return part;
 }
 
+Job reseeded(Job job, unsigned seedOffset) {
+    job.scene.seed += seedOffset;
+    for (Job& run : job.otherRuns) run.scene.seed += seedOffset;
+    return job;
+}
+
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution, double gridShift) {
     Scene scene = job.scene;
     for (size_t i = 0; i < job.parameters.size(); ++i) setParameter(scene, job.parameters[i].parameter, theta.at(i));

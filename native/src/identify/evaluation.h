@@ -104,6 +104,8 @@ struct Evaluation {
 // `gridShift` moves the simulation grid by that many cells along x and y (the scene's solids,
 // liquid and camera stay where they are).
 Scene sceneWithParameters(const Job& job, const std::vector<double>& theta, int resolution, double gridShift = 0);
+// `job` with `seedOffset` added to the particle seed of every run: another draw of the seeding.
+Job reseeded(Job job, unsigned seedOffset);
 // Simulates θ at `resolution` and scores it, on each of the job's gridPlacements in turn (E, the
 // frames' E and the silhouette area are their means, the timings their sums), or with the
 // ByGeneration schedule on the grid moved by `gridShift` alone. With a `fieldsDir`,

@@ -114,13 +114,9 @@ int ThreadPool::concurrency() const { return threads_->arena->max_concurrency();
 
 BatchResult ThreadPool::evaluate(const Job& asked, const Observations& observations, const EvaluationBatch& batch) {
     const Observation& observation = batch.coarse ? observations.coarse : observations.full;
-    Job reseeded;
-    if (batch.seedOffset != 0) {
-        reseeded = asked;
-        reseeded.scene.seed += batch.seedOffset;
-        for (Job& run : reseeded.otherRuns) run.scene.seed += batch.seedOffset;
-    }
-    const Job& job = batch.seedOffset != 0 ? reseeded : asked;
+    const std::optional<Job> reseededJob =
+        batch.seedOffset != 0 ? std::optional<Job>(reseeded(asked, batch.seedOffset)) : std::nullopt;
+    const Job& job = reseededJob ? *reseededJob : asked;
     const int count = static_cast<int>(batch.thetas.size());
     BatchResult result;
     result.evaluations.resize(count);
