@@ -296,10 +296,13 @@ def identify_args(engine, job_path, out_dir, threads=0):
         _threads(engine, "identify", threads)
 
 
-def diagnose_args(engine, job_path, out_dir, threads=0, time_budget_s=0.0):
-    """`time_budget_s` for the whole diagnosis (0: each fit has the job's own)."""
-    return [engine, "diagnose", job_path, "--out", out_dir, "--progress", "json",
-            "--time-budget", "%g" % time_budget_s] + _threads(engine, "diagnose", threads)
+def diagnose_args(engine, job_path, out_dir, threads=0, time_budget_s=0.0, effects=None):
+    """`time_budget_s` for the whole diagnosis (0: each fit has the job's own); `effects` the
+    candidates by name (None: every one the scene can hold)."""
+    args = [engine, "diagnose", job_path, "--out", out_dir, "--progress", "json", "--time-budget", "%g" % time_budget_s]
+    if effects is not None:
+        args += ["--effects", ",".join(effects)]
+    return args + _threads(engine, "diagnose", threads)
 
 
 # A job's "extraction" names (observe.h, parseExtractionOptions) → `extract`'s options, so that the

@@ -231,6 +231,11 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                             description="Wall time for the whole diagnosis, shared by its fits "
                                                         "(the base and each effect); 0 = each fit has the "
                                                         "Identify panel's time budget")
+    diagnosis_effects: EnumProperty(
+        name="Effects", options={'ENUM_FLAG'},
+        items=[(e["name"], e["title"].capitalize(), e["description"]) for e in schema.EFFECTS],
+        default={e["name"] for e in schema.EFFECTS},
+        description="The effects the diagnosis tries beside the base model (each one a fit sharing the budget)")
     # Results
     result_eta: FloatProperty(name="η", default=0.0, precision=4)
     result_eta_low: FloatProperty(name="η low", default=0.0, precision=4)
@@ -248,6 +253,9 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
     diagnosis_material: StringProperty(default="")
     diagnosis_source: StringProperty(default="")  # what Apply Effect records as the material's origin
     diagnosis_applied: BoolProperty(default=False)
+    # diagnosis.json's suggested_settings (JSON) and the grid the diagnosis ran on, in words.
+    diagnosis_suggested: StringProperty(default="")
+    diagnosis_grid: StringProperty(default="")
     # Fluid material
     fluid: PointerProperty(type=ViscoscopeFluid)
     # Transfer simulation

@@ -6,6 +6,7 @@ import textwrap
 import bpy
 
 from . import engine, mantaflow, prefs
+from .operators import diagnose
 from .operators import fluid as fluid_ops
 from .operators import mantaflow_calibration as calibration
 from .operators import runner
@@ -316,9 +317,9 @@ class VIEW3D_PT_viscoscope_diagnose(_ViscoscopePanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         vs = context.scene.viscoscope
-        draw_message(layout, context, "Fits the Identify panel's job and each effect the model may lack "
-                                      "(shear thinning, a yield stress, wall slip, side walls): one "
+        draw_message(layout, context, "Fits the Identify panel's job and each effect chosen below: one "
                                       "identification each, sharing the time budget")
+        layout.prop(vs, "diagnosis_effects")
         layout.prop(vs, "diagnosis_budget_minutes")
         draw_job(layout, context, "diagnose", "viscoscope.diagnose", "Diagnose",
                  resume_op="viscoscope.diagnose_resume")
@@ -327,6 +328,9 @@ class VIEW3D_PT_viscoscope_diagnose(_ViscoscopePanel, bpy.types.Panel):
         box = layout.box()
         icon = {'missing_effect': 'VIEWZOOM', 'no_missing_effect': 'CHECKMARK'}.get(vs.diagnosis_verdict, 'ERROR')
         draw_message(box, context, vs.diagnosis_conclusion[:1].upper() + vs.diagnosis_conclusion[1:], icon=icon)
+        for setting, _value, text in diagnose.suggestions(vs):
+            box.operator("viscoscope.use_suggestion", text=text, icon='MODIFIER').setting = setting
+        draw_message(box, context, vs.diagnosis_grid)
         for line in vs.diagnosis_report.splitlines():
             draw_message(box, context, line)
         if vs.diagnosis_material:

@@ -93,6 +93,10 @@ def read_diagnosis(context, out_dir):
                      "with it; scenes that should show the effect need the solid too (%s)"
                      % (chosen, ", ".join(describe_parameter(n, after["parameters"][n]) for n in geometry)))
     vs = context.scene.viscoscope
+    grid = doc["grid"]
+    vs.diagnosis_grid = "Ran at resolution %d on %d grid placement%s" % (
+        grid["resolution"], grid["grid_placements"], "" if grid["grid_placements"] == 1 else "s")
+    vs.diagnosis_suggested = json.dumps(doc["suggested_settings"])
     vs.diagnosis_conclusion = doc["conclusion"]
     vs.diagnosis_verdict = doc["verdict"]
     vs.diagnosis_effect = chosen or ""
@@ -144,6 +148,49 @@ class VISCOSCOPE_OT_apply_effect(bpy.types.Operator):
         return {'FINISHED'}
 
 
+# diagnosis.json's suggested settings the panel can set: the property each goes into, how a value
+# becomes the property's, and the button's words.
+SUGGESTIONS = {
+    "time_budget_s": ("diagnosis_budget_minutes", lambda s: math.ceil(s / 60.0), "Set Time Budget to %d min"),
+    "resolution": ("identify_resolution", int, "Set Resolution to %d"),
+    "grid_placements": ("grid_placements", int, "Set Grid Placements to %d"),
+}
+
+
+def suggestions(vs):
+    """(setting, value, button text) for each suggested setting the panel holds a property of,
+    within that property's range."""
+    found = []
+    for setting, value in json.loads(vs.diagnosis_suggested or "{}").items():
+        if setting not in SUGGESTIONS:
+            continue
+        prop, convert, text = SUGGESTIONS[setting]
+        rna = vs.bl_rna.properties[prop]
+        value = convert(value)
+        if rna.hard_min <= value <= rna.hard_max and value != getattr(vs, prop):
+            found.append((setting, value, text % value))
+    return found
+
+
+class VISCOSCOPE_OT_use_suggestion(bpy.types.Operator):
+    """Set the panel's setting to what the diagnosis suggests would tell (then run it again)"""
+    bl_idname = "viscoscope.use_suggestion"
+    bl_label = "Use Suggestion"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    setting: bpy.props.StringProperty()
+
+    def execute(self, context):
+        vs = context.scene.viscoscope
+        for setting, value, text in suggestions(vs):
+            if setting == self.setting:
+                setattr(vs, SUGGESTIONS[setting][0], value)
+                self.report({'INFO'}, text.replace("Set ", "", 1).replace(" to ", " set to ", 1))
+                return {'FINISHED'}
+        self.report({'ERROR'}, "the diagnosis suggests no %s the panel can set" % self.setting)
+        return {'CANCELLED'}
+
+
 class _DiagnoseBase(JobOperator):
     job_kind = "diagnose"
     run_name = "diagnosis"
@@ -151,11 +198,17 @@ class _DiagnoseBase(JobOperator):
     folder = staticmethod(diagnose_dir)
 
     def prepare(self, context):
-        self.time_budget_s = 60.0 * context.scene.viscoscope.diagnosis_budget_minutes
+        vs = context.scene.viscoscope
+        if not vs.diagnosis_effects:
+            raise engine.EngineError("no effect to try: choose at least one of the Diagnose panel's effects")
+        self.time_budget_s = 60.0 * vs.diagnosis_budget_minutes
+        # All of them: the engine leaves out, and lists in not_tried, those the scene cannot hold.
+        chosen = [e["name"] for e in schema.EFFECTS if e["name"] in vs.diagnosis_effects]
+        self.effects = None if len(chosen) == len(schema.EFFECTS) else chosen
         return super().prepare(context)
 
     def engine_args(self, exe, job, out_dir, threads):
-        return engine.diagnose_args(exe, job, out_dir, threads, time_budget_s=self.time_budget_s)
+        return engine.diagnose_args(exe, job, out_dir, threads, time_budget_s=self.time_budget_s, effects=self.effects)
 
     def on_success(self, context, out_dir):
         read_diagnosis(context, out_dir)
@@ -176,4 +229,5 @@ class VISCOSCOPE_OT_diagnose_resume(_DiagnoseBase, bpy.types.Operator):
     resume = True
 
 
-classes = (VISCOSCOPE_OT_diagnose, VISCOSCOPE_OT_diagnose_resume, VISCOSCOPE_OT_apply_effect)
+classes = (VISCOSCOPE_OT_diagnose, VISCOSCOPE_OT_diagnose_resume, VISCOSCOPE_OT_apply_effect,
+           VISCOSCOPE_OT_use_suggestion)

@@ -17,7 +17,7 @@ import bpy
 import pytest
 
 from viscoscope import engine, schema, scene_export
-from viscoscope.operators.diagnose import diagnose_dir
+from viscoscope.operators.diagnose import diagnose_dir, suggestions
 
 pytestmark = pytest.mark.engine
 
@@ -216,6 +216,34 @@ def test_a_missing_track_is_one_clear_line(ctx, tmp_work, engine_path, use_engin
     with pytest.raises(RuntimeError, match="measured track CSV not found: .*nowhere.csv"):
         bpy.ops.viscoscope.diagnose('EXEC_DEFAULT')
     assert "nowhere.csv" in ctx.scene.viscoscope.diagnose_job.error
+
+
+def test_a_budget_that_cannot_hold_the_chosen_effect_offers_one_that_would(ctx, tmp_work, engine_path, use_engine):
+    """One effect chosen and a budget far under a generation: the engine fits the base and no
+    candidate, and the panel says it cannot tell, shows the grid it ran on, and offers a button that
+    sets the budget the engine predicts would hold the chosen effect's fit."""
+    use_engine(engine_path)
+    _film_scene(ctx.scene, _write_track(os.path.join(str(tmp_work), "huppert.csv"), _huppert_radius))
+    vs = ctx.scene.viscoscope
+    vs.diagnosis_effects = set()
+    with pytest.raises(RuntimeError, match="no effect to try"):
+        bpy.ops.viscoscope.diagnose('EXEC_DEFAULT')
+    vs.diagnosis_effects = {"shear_thinning"}
+    vs.diagnosis_budget_minutes = 1e-4
+    assert bpy.ops.viscoscope.diagnose('EXEC_DEFAULT') == {'FINISHED'}, vs.diagnose_job.error
+    diagnosis = json.load(open(os.path.join(diagnose_dir(ctx.scene), "out", "diagnosis.json")))
+    assert not diagnosis["candidates"]
+    assert [n["effect"] for n in diagnosis["not_tried"]] == ["shear_thinning"], diagnosis["not_tried"]
+    assert diagnosis["not_tried"][0]["why"].startswith("the time budget")
+    assert vs.diagnosis_verdict == "cannot_tell", vs.diagnosis_conclusion
+    assert vs.diagnosis_grid.startswith("Ran at resolution 150 on "), vs.diagnosis_grid
+    minutes = math.ceil(diagnosis["suggested_settings"]["time_budget_s"] / 60.0)
+    assert ("time_budget_s", minutes, "Set Time Budget to %d min" % minutes) in suggestions(vs)
+    assert bpy.ops.viscoscope.use_suggestion(setting="time_budget_s") == {'FINISHED'}
+    assert vs.diagnosis_budget_minutes == minutes
+    assert all(setting != "time_budget_s" for setting, _v, _t in suggestions(vs))
+    with pytest.raises(RuntimeError, match="suggests no resolution"):
+        bpy.ops.viscoscope.use_suggestion(setting="resolution")
 
 
 def test_two_runs_of_one_liquid_are_fitted_together(ctx, tmp_work, engine_path, use_engine, request):

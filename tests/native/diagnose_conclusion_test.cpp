@@ -45,13 +45,15 @@ protected:
         job_.gridPlacements = 2;
     }
     diagnose::Conclusion conclude(const diagnose::ModelFit& base, const std::vector<diagnose::ModelFit>& fits,
-                                  const diagnose::NoiseFloor& noise, const std::vector<bool>& vanishes = {}) {
+                                  const diagnose::NoiseFloor& noise, const std::vector<bool>& vanishes = {},
+                                  const diagnose::Unfitted& unfitted = {}) {
         std::vector<diagnose::Judged> judged;
         for (size_t i = 0; i < fits.size(); ++i)
             judged.push_back({&fits[i], &effects_[i % effects_.size()], i < vanishes.size() && vanishes[i]});
-        return diagnose::conclude(job_, base, judged, noise);
+        return diagnose::conclude(job_, timeBudget_, base, judged, noise, unfitted);
     }
     identify::Job job_;
+    double timeBudget_ = 0;
     std::vector<diagnose::Effect> effects_{effectOf("shear_thinning", "shear thinning"), effectOf("wall_slip", "wall slip")};
 };
 
@@ -84,6 +86,8 @@ TEST_F(Conclusion, CannotTellAGainWithinTheScatter) {
     EXPECT_FALSE(c.candidates[0].aboveNoise);
     EXPECT_TRUE(mentions(c.whatWouldTell, "finer grid (resolution 48 → 72)")) << c.sentence;
     EXPECT_TRUE(mentions(c.whatWouldTell, "grid_placements 2 → 4"));
+    EXPECT_EQ(c.suggestedSettings.value("resolution", 0), 72);
+    EXPECT_EQ(c.suggestedSettings.value("grid_placements", 0), 4);
 }
 
 TEST_F(Conclusion, FindsNoMissingEffectWhereOneWouldHaveShown) {
@@ -104,12 +108,24 @@ TEST_F(Conclusion, CannotTellWhereTheScatterWouldHideAnEffect) {
 }
 
 TEST_F(Conclusion, NamesNothingAgainstABaseCutShort) {
-    diagnose::ModelFit base = fitOf("base", 0.10, -50, identify::StopReason::TimeBudget);
-    base.timeBudget = 60;  // its share of the diagnosis's --time-budget
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50, identify::StopReason::TimeBudget);
+    timeBudget_ = 300;
     const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70)}, scatteredBy(1.01));
     EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
     EXPECT_TRUE(c.candidates[0].earns);
-    EXPECT_TRUE(mentions(c.whatWouldTell, "time-budget")) << c.sentence;
+    EXPECT_TRUE(mentions(c.whatWouldTell, "--time-budget of 600 s")) << c.sentence;
+    EXPECT_EQ(c.suggestedSettings.value("time_budget_s", 0), 600);
+}
+
+TEST_F(Conclusion, SaysWhatBudgetWouldHoldTheCandidatesItLeftUnfitted) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    timeBudget_ = 480;
+    const auto c = conclude(base, {}, scatteredBy(1.01), {}, {4, 2399.6});
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_NE(c.sentence.find("4 candidates"), std::string::npos) << c.sentence;
+    EXPECT_NE(c.sentence.find("2400 s"), std::string::npos) << c.sentence;
+    EXPECT_TRUE(mentions(c.whatWouldTell, "fewer --effects"));
+    EXPECT_EQ(c.suggestedSettings.value("time_budget_s", 0), 2400);
 }
 
 TEST_F(Conclusion, CannotTellWhileACandidateWasCutShort) {

@@ -17,7 +17,8 @@ Command addSchemaCommand(CLI::App& app) {
                 nlohmann::json schema = parameterSchema();
                 schema["effects"] = nlohmann::json::array();
                 for (const diagnose::Effect& e : diagnose::effects())
-                    schema["effects"].push_back({{"name", e.name}, {"description", e.description}, {"source", e.source}});
+                    schema["effects"].push_back(
+                        {{"name", e.name}, {"title", e.title}, {"description", e.description}, {"source", e.source}});
                 std::cout << schema.dump(2) << "\n";
                 return kExitOk;
             }};

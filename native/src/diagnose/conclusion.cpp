@@ -18,6 +18,9 @@ constexpr double kGainConfidence = 0.95;
 
 std::string percent(double share) { return std::to_string(std::lround(100 * share)) + " %"; }
 
+// A budget to suggest: whole seconds, rounded up, at least one.
+long wholeSecondsOver(double seconds) { return std::max(1L, long(std::ceil(seconds))); }
+
 std::string joined(const std::vector<std::string>& items) {
     std::string all;
     for (size_t i = 0; i < items.size(); ++i) all += (i == 0 ? "" : i + 1 == items.size() ? " and " : ", ") + items[i];
@@ -31,25 +34,33 @@ std::string scatterPhrase(const NoiseFloor& noise) {
            " seeds and grid placements, explains gains up to " + percent(noise.visibleShare());
 }
 
-// What shrinks the scatter against the effect: a finer grid, more placements averaged, more data.
-std::vector<std::string> lessScatter(const Job& job) {
-    std::vector<std::string> tell{"a finer grid (resolution " + std::to_string(job.resolution) + " → " +
-                                      std::to_string(int(std::lround(1.5 * job.resolution))) + ")",
-                                  "more grid placements averaged (grid_placements " + std::to_string(job.gridPlacements) +
-                                      " → " + std::to_string(2 * job.gridPlacements) + ")"};
-    tell.push_back(job.otherRuns.empty() ? "a second run of the same liquid in another geometry (\"runs\")"
-                                         : "a longer clip of each run");
-    return tell;
-}
-
-std::string moreTime(const ModelFit& base) {
-    return base.timeBudget > 0 ? "more time for each fit (a larger --time-budget, or 0 to give each fit the job's own)"
-                               : "more generations for each fit (max_generations, time_budget_s)";
-}
-
 void addOnce(std::vector<std::string>& list, const std::vector<std::string>& items) {
     for (const std::string& item : items)
         if (std::find(list.begin(), list.end(), item) == list.end()) list.push_back(item);
+}
+
+// What shrinks the scatter against the effect: a finer grid, more placements averaged, more data.
+void lessScatter(const Job& job, Conclusion& conclusion) {
+    const int finer = int(std::lround(1.5 * job.resolution));
+    addOnce(conclusion.whatWouldTell, {"a finer grid (resolution " + std::to_string(job.resolution) + " → " + std::to_string(finer) + ")",
+                                       "more grid placements averaged (grid_placements " + std::to_string(job.gridPlacements) +
+                                           " → " + std::to_string(2 * job.gridPlacements) + ")",
+                                       job.otherRuns.empty() ? "a second run of the same liquid in another geometry (\"runs\")"
+                                                             : "a longer clip of each run"});
+    conclusion.suggestedSettings["resolution"] = finer;
+    conclusion.suggestedSettings["grid_placements"] = 2 * job.gridPlacements;
+}
+
+// More time for fits cut short: twice the budget, the fits' own minimum not being known.
+void moreTime(double timeBudget, Conclusion& conclusion) {
+    if (timeBudget > 0) {
+        const long twice = wholeSecondsOver(2 * timeBudget);
+        addOnce(conclusion.whatWouldTell, {"more time for each fit (a --time-budget of " + std::to_string(twice) +
+                                           " s, twice this one, or 0 to give each fit the job's own)"});
+        if (!conclusion.suggestedSettings.contains("time_budget_s")) conclusion.suggestedSettings["time_budget_s"] = twice;
+    } else {
+        addOnce(conclusion.whatWouldTell, {"more generations for each fit (max_generations, time_budget_s)"});
+    }
 }
 
 }  // namespace
@@ -81,7 +92,8 @@ const char* toString(Verdict verdict) {
     return "?";
 }
 
-Conclusion conclude(const Job& job, const ModelFit& base, const std::vector<Judged>& candidates, const NoiseFloor& noise) {
+Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, const std::vector<Judged>& candidates,
+                    const NoiseFloor& noise, const Unfitted& unfitted) {
     Conclusion conclusion;
     const double visible = noise.visibleShare();
     std::optional<size_t> best;
@@ -111,28 +123,38 @@ Conclusion conclude(const Job& job, const ModelFit& base, const std::vector<Judg
         return conclusion;
     }
     std::vector<std::string> why;
-    if (candidates.empty()) {
+    if (unfitted.candidates > 0) {
+        const long neededSeconds = wholeSecondsOver(unfitted.budgetNeeded);
+        const std::string needed = std::to_string(neededSeconds);
+        const std::string fits = unfitted.candidates == 1 ? "the candidate's least fit"
+                                                          : "the " + std::to_string(unfitted.candidates) + " candidates' least fits";
+        why.push_back("the time budget held the base fit but not " + fits + ", which a budget of about " + needed +
+                      " s would hold on this machine");
+        addOnce(conclusion.whatWouldTell, {"a --time-budget of at least " + needed + " s, or fewer --effects"});
+        conclusion.suggestedSettings["time_budget_s"] = neededSeconds;
+    } else if (candidates.empty()) {
         why.push_back("no effect could be tried on this job (not_tried says why)");
     }
     if (best) {
         why.push_back(candidates[*best].effect->title + " predicts the held-out frames " +
                       percent(conclusion.candidates[*best].relativeGain) + " better, but the base fit was cut short (" +
                       (base.stop ? toString(*base.stop) : "?") + "), and the gain may be its shortfall");
-        addOnce(conclusion.whatWouldTell, {moreTime(base)});
+        moreTime(timeBudget, conclusion);
     }
     if (!withinScatter.empty()) {
         why.push_back(joined(withinScatter));
-        addOnce(conclusion.whatWouldTell, lessScatter(job));
+        lessScatter(job, conclusion);
     }
     if (!(visible <= kHeldOutGain)) {
         why.push_back(noise.heldOutE.size() < 2 ? std::string("the simulation's scatter was not measured")
                                                 : scatter + ", more than the " + percent(kHeldOutGain) + " an effect must show");
-        addOnce(conclusion.whatWouldTell, lessScatter(job));
+        if (noise.heldOutE.size() >= 2) lessScatter(job, conclusion);
+        else addOnce(conclusion.whatWouldTell, {"the noise floor measured (--scatter-replicas 2 or more, and the time for them)"});
     }
     if (!base.searchCompleted()) cutShort.insert(cutShort.begin(), "base");
     if (!cutShort.empty() && !best) {
         why.push_back("the fits of " + joined(cutShort) + " were cut short by the time budget");
-        addOnce(conclusion.whatWouldTell, {moreTime(base)});
+        moreTime(timeBudget, conclusion);
     }
     if (!why.empty()) {
         conclusion.verdict = Verdict::CannotTell;

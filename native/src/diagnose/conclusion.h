@@ -34,17 +34,27 @@ struct CandidateVerdict {
     bool earns = false;       // named if the base converged: above the noise, kHeldOutGain, BIC, not vanished
 };
 
+// Candidates left unfitted because the time budget could not hold their fits' minimum generations.
+struct Unfitted {
+    int candidates = 0;
+    double budgetNeeded = 0;  // wall seconds of a budget predicted to hold them all
+};
+
 struct Conclusion {
     Verdict verdict = Verdict::CannotTell;
     std::optional<size_t> chosen;             // into the candidates, with MissingEffect
     std::string sentence;                     // the conclusion in words
     std::vector<std::string> whatWouldTell;   // with CannotTell: what would decide it
+    // The same as settings to act on, by their names in a job or on diagnose's command line
+    // ("resolution", "grid_placements", "time_budget_s").
+    nlohmann::json suggestedSettings = nlohmann::json::object();
     std::vector<CandidateVerdict> candidates;
 };
 
-// `base` and `candidates` fitted and scored alike, `noise` measured at the base's θ*; `job` for
-// what would tell (its grid, placements and runs).
-Conclusion conclude(const identify::Job& job, const ModelFit& base, const std::vector<Judged>& candidates,
-                    const NoiseFloor& noise);
+// `base` and `candidates` fitted and scored alike, `noise` measured at the base's θ*, `unfitted`
+// the candidates the budget could not hold; `job` for what would tell (its grid, placements and
+// runs) and `timeBudget` the diagnosis's (0: none of its own).
+Conclusion conclude(const identify::Job& job, double timeBudget, const ModelFit& base,
+                    const std::vector<Judged>& candidates, const NoiseFloor& noise, const Unfitted& unfitted = {});
 
 }  // namespace viscoscope::diagnose

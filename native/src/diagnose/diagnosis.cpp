@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 namespace viscoscope::diagnose {
 
@@ -179,7 +180,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     const int fits = 1 + static_cast<int>(candidates.size());
     // The steps the progress counts: the fits and the noise floor after the base's.
     const bool measuresScatter = options.scatterReplicas > 0;
-    const int steps = fits + (measuresScatter ? 1 : 0);
+    int steps = fits + (measuresScatter ? 1 : 0);
     int step = 0;
 
     json warnings = json::array();
@@ -199,19 +200,42 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         warn("diagnose: the base fit was cut short (" + std::string(toString(*diagnosis.base.stop)) + ") after " +
              std::to_string(diagnosis.base.evaluations) + " evaluations: no effect will be named unless its refit "
              "completes (a larger --time-budget, or 0 to give each fit the job's own)");
+    const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
+    std::vector<Candidate> fitted(candidates.size());  // each candidate as it is fitted
+    for (size_t c = 0; c < candidates.size(); ++c) candidateFor(*candidates[c], baseFit, fitted[c]);
+    // Before the candidates' hours: whether the budget holds their least fits (predicted from the
+    // base's), with the noise floor's scorings (each as long as the base's). Where it does not, the
+    // conclusion cannot be other than "cannot tell", and the diagnosis says what budget would tell.
+    const int replicas = std::max(0, options.scatterReplicas);
+    const double noiseSeconds = replicas * diagnosis.base.scoringSeconds;
+    std::vector<double> leastSeconds;
+    for (const Candidate& candidate : fitted)
+        leastSeconds.push_back(leastFitSeconds(job, diagnosis.base, int(candidate.parameters.size())));
+    const double leastCandidates = std::accumulate(leastSeconds.begin(), leastSeconds.end(), 0.0);
+    Unfitted beyondBudget;
+    if (!budget.holds(noiseSeconds + leastCandidates)) {
+        beyondBudget = {int(candidates.size()), budget.spent() + noiseSeconds + leastCandidates};
+        for (size_t c = 0; c < candidates.size(); ++c)
+            refused.emplace_back(candidates[c]->name, "the time budget: its fit takes about " +
+                                                          std::to_string(std::lround(leastSeconds[c])) +
+                                                          " s at least (at the base's cost an evaluation), more than "
+                                                          "the budget had left");
+        warn("diagnose: the time budget holds the base fit but not the candidates' least fits: no candidate is fitted "
+             "(a --time-budget of about " + std::to_string(std::lround(beyondBudget.budgetNeeded)) + " s or more, or fewer --effects)");
+        steps -= int(candidates.size());
+        candidates.clear();
+        fitted.clear();
+    }
     if (measuresScatter && options.onFit) options.onFit("noise_floor", step++, steps, {});
-    diagnosis.noise = measureScatter(job, observations, fitCounts, diagnosis.base, std::max(0, options.scatterReplicas));
+    diagnosis.noise = measureScatter(job, observations, fitCounts, diagnosis.base, budget.holds(noiseSeconds) ? replicas : 0);
     budget.spend(diagnosis.noise);
     json candidatesDoc = json::array();
     std::vector<json> candidateSeries;
-    std::vector<Candidate> fitted;                 // each candidate as it was fitted
     std::vector<Job> models;                       // each candidate's job over all frames
     std::vector<std::vector<double>> equivalents;  // each candidate's base-equivalent point
-    const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
     for (size_t c = 0; c < candidates.size(); ++c) {
         const Effect& effect = *candidates[c];
-        const Candidate& candidate = fitted.emplace_back();
-        candidateFor(effect, baseFit, fitted.back());
+        const Candidate& candidate = fitted[c];
         const json& parameters = candidate.parameters;
         if (options.onFit) {
             std::vector<std::string> names;
@@ -294,7 +318,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                  "--effects to share them)");
         judged.push_back({&fit, candidates[c], vanishes});
     }
-    const Conclusion conclusion = conclude(job, base, judged, diagnosis.noise);
+    const Conclusion conclusion = conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget);
     diagnosis.verdict = conclusion.verdict;
     diagnosis.chosen = conclusion.chosen;
     for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
@@ -344,6 +368,8 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         {"verdict", toString(conclusion.verdict)},
         {"conclusion", conclusion.sentence},
         {"what_would_tell", conclusion.whatWouldTell},
+        {"suggested_settings", conclusion.suggestedSettings},
+        {"grid", {{"resolution", job.resolution}, {"grid_placements", job.gridPlacements}}},
         {"criterion", "fitted on each run's first " + std::to_string(int(std::lround(100 * options.fitShare))) +
                           " % of compared frames; an effect earns its parameters when its E over the held-out rest is "
                           "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +

@@ -139,9 +139,15 @@ RunScore scoreRun(const Job& asked, const Observation& obs, const std::vector<do
 
 }  // namespace
 
+// How far past its budget a diagnosis may end: a search stops only between generations, and the
+// fits after the base are predicted from its cost, not measured.
+constexpr double kBudgetOverrun = 0.1;
+
 double FitBudget::nextSearch() const {
     return total_ > 0 ? std::max(1e-3, (total_ - spent_) / std::max(1, fitsLeft_) - lastScoring_) : 0.0;
 }
+
+bool FitBudget::holds(double seconds) const { return total_ <= 0 || spent_ + seconds <= (1 + kBudgetOverrun) * total_; }
 
 void FitBudget::spend(const ModelFit& fit) {
     spent_ += fit.seconds + fit.scoringSeconds;
@@ -165,6 +171,7 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
         const IdentificationResult result = identify::identify(fitting, dir, identifyOptions);
         fit.theta = result.theta;
         fit.interval = result.interval;
+        fit.generations = result.generations;
         fit.evaluations = result.evaluations;
         fit.seconds = result.seconds;
         fit.stop = result.stop;
@@ -190,6 +197,13 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
     const double n = fittedFrames, k = double(fit.theta.size());
     fit.bic = n * std::log(std::max(fit.fittedE, 1e-300) / n) + k * std::log(n);
     return fit;
+}
+
+double leastFitSeconds(const Job& job, const ModelFit& base, int dimension) {
+    if (base.evaluations <= 0) return 0;
+    const double perEvaluation = base.seconds / base.evaluations;
+    const int generation = populationSize(dimension, {job.populationSize});
+    return (job.fidelity.minFineGenerations * generation + 1) * perEvaluation + base.scoringSeconds;
 }
 
 bool ModelFit::searchCompleted() const {

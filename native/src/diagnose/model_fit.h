@@ -37,6 +37,9 @@ class FitBudget {
     // 0: no budget of the diagnosis's own (the job's time_budget_s stands). Never 0 otherwise, which
     // would mean none: an overspent budget still runs the minimum generations (and diagnose warns).
     double nextSearch() const;
+    // Whether `seconds` more end within the budget, or no later than kBudgetOverrun past it (always
+    // without a budget).
+    bool holds(double seconds) const;
     void spend(const ModelFit& fit);
     void spend(const NoiseFloor& noise);
     double spent() const { return spent_; }
@@ -45,6 +48,12 @@ class FitBudget {
     double total_, spent_ = 0, lastScoring_ = 0;
     int fitsLeft_;
 };
+
+// The least wall seconds a fit over `dimension` parameters takes in `job`, predicted from the base
+// fit's search and scoring: its minimum generations of λ evaluations (one more in the first, for its
+// known point) at the base's wall seconds an evaluation, and a scoring as long as the base's. 0 when
+// the base searched nothing.
+double leastFitSeconds(const identify::Job& job, const ModelFit& base, int dimension);
 
 // Fits a model (`fitting`: its job over the fitted frames) with `identifyOptions`' known point and
 // start curve, if given, within `searchBudget` wall seconds (0: the job's), then scores θ* on every

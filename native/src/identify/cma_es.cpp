@@ -24,6 +24,11 @@ Eigen::VectorXd vectorFromJson(const nlohmann::json& j) {
 
 }  // namespace
 
+int populationSize(int dimension, const CmaEsSettings& settings) {
+    return settings.populationSize > 0 ? settings.populationSize
+                                       : 4 + static_cast<int>(std::floor(3 * std::log(static_cast<double>(dimension))));
+}
+
 CmaEs::CmaEs(const Eigen::VectorXd& initialMean, double initialSigma, std::uint64_t seed,
              const CmaEsSettings& settings)
     : CmaEs(initialMean, Eigen::VectorXd::Constant(initialMean.size(), initialSigma), seed, settings) {}
@@ -32,8 +37,7 @@ CmaEs::CmaEs(const Eigen::VectorXd& initialMean, const Eigen::VectorXd& initialS
              const CmaEsSettings& settings)
     : n_(static_cast<int>(initialMean.size())), seed_(seed), random_(seed) {
     if (n_ < 1) throw std::invalid_argument("CmaEs: dimension must be ≥ 1");
-    lambda_ = settings.populationSize > 0 ? settings.populationSize
-                                          : 4 + static_cast<int>(std::floor(3 * std::log(static_cast<double>(n_))));
+    lambda_ = populationSize(n_, settings);
     if (lambda_ < 2) throw std::invalid_argument("CmaEs: population size must be ≥ 2");
     setStrategyParameters();
     restart(initialMean, initialSpreads);

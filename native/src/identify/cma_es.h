@@ -14,6 +14,9 @@ struct CmaEsSettings {
     int populationSize = 0;  // λ; 0 = 4 + ⌊3 ln n⌋
 };
 
+// λ for a search over `dimension` parameters with `settings`.
+int populationSize(int dimension, const CmaEsSettings& settings = {});
+
 class CmaEs {
 public:
     CmaEs(const Eigen::VectorXd& initialMean, double initialSigma, std::uint64_t seed,
