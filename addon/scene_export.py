@@ -130,7 +130,7 @@ def material_dict(fluid):
         if declaration["home"] == "material.model" and model["type"] in declaration["types"] and hasattr(fluid, name):
             model[name] = _declared(name, getattr(fluid, name))
     material = {name: _declared(name, getattr(fluid, name))
-                for name in ("density", "viscosity", "surface_tension", "slip_length")}
+                for name, declaration in schema.PARAMETERS.items() if declaration["home"] == "material"}
     material["model"] = model
     return material
 

@@ -61,7 +61,7 @@ std::string filmProblem(const Scene& scene) {
     if (!(reach >= kMinCells * scene.cellSize()))
         return "the thin-film model needs " + std::to_string(kMinCells) +
                " cells or more from the emitters' centre to the domain's nearest side";
-    if (std::holds_alternative<Carreau>(scene.material.model))
+    if (!sim::MaterialLaw(scene.material).yieldingPowerLaw())
         return "the thin-film model holds newtonian, power_law and herschel_bulkley materials, not carreau";
     return "";
 }
@@ -75,15 +75,7 @@ AxisymmetricFilm::AxisymmetricFilm(const Scene& scene) {
     for (int i = 0; i < cells; ++i) area_.push_back(kPi * dr_ * dr_ * (2.0 * i + 1.0));
     h_.assign(cells, kPrecursorThickness);
     rhoG_ = scene.material.density * -scene.gravity.z();
-    consistency_ = scene.material.viscosity;
-    if (const auto* law = std::get_if<PowerLaw>(&scene.material.model)) {
-        consistency_ = law->consistency;
-        index_ = law->index;
-    } else if (const auto* hb = std::get_if<HerschelBulkley>(&scene.material.model)) {
-        consistency_ = hb->consistency;
-        index_ = hb->index;
-        yieldStress_ = hb->yieldStress;
-    }
+    law_ = *sim::MaterialLaw(scene.material).yieldingPowerLaw();
     slipLength_ = scene.material.slipLength;
     for (const LiquidSource& source : scene.liquids) {
         const auto& e = std::get<DiscEmitter>(source);
@@ -96,12 +88,12 @@ AxisymmetricFilm::FaceFlux AxisymmetricFilm::faceFlux(double faceRadius, double 
     // A vanishing slope keeps the Newtonian flux's derivative in the slope, which Newton needs to
     // start from a flat film.
     const double G = std::max(std::abs(slope), 1e-12);
-    const double m = 1 / index_, n = index_;
-    const double plugDepth = yieldStress_ / (rhoG_ * G);  // above Y the liquid moves as a plug
+    const double m = 1 / law_.index, n = law_.index;
+    const double plugDepth = law_.yieldStress / (rhoG_ * G);  // above Y the liquid moves as a plug
     const double Y = h - plugDepth;
     if (h <= 0 || Y <= 0) return {0, 0, 0};
     const double dYdG = plugDepth / G;
-    const double shear = std::pow(rhoG_ * G / consistency_, m);  // (ρgG/K)^(1/n)
+    const double shear = std::pow(rhoG_ * G / law_.consistency, m);  // (ρgG/K)^(1/n)
     const double Ym = std::pow(Y, m);
     const double c = n / (n + 1), b = n / (2 * n + 1), bracket = h - b * Y;
     // q(h, G) of the header, and its partial derivatives.

@@ -11,6 +11,7 @@
 #pragma once
 
 #include "scene/scene.h"
+#include "sim/material_model.h"
 
 #include <functional>
 #include <string>
@@ -62,7 +63,8 @@ private:
     double dr_ = 0;
     std::vector<double> area_;  // of each annular cell (m²)
     std::vector<double> h_;
-    double rhoG_ = 0, consistency_ = 1, index_ = 1, yieldStress_ = 0, slipLength_ = 0;
+    double rhoG_ = 0, slipLength_ = 0;
+    sim::YieldingPowerLaw law_;
     struct Emitter {
         double radius, flux, start, end;
     };

@@ -19,45 +19,101 @@ namespace {
 constexpr double kRequired = std::numeric_limits<double>::quiet_NaN();
 constexpr double kSceneValue = std::numeric_limits<double>::quiet_NaN();
 
+struct SolidName {
+    const char* operator()(const GroundSolid&) const { return "ground"; }
+    const char* operator()(const BoxSolid&) const { return "box"; }
+    const char* operator()(const CupSolid&) const { return "cup"; }
+    const char* operator()(const MeshSolid&) const { return "mesh"; }
+    const char* operator()(const ChannelSolid&) const { return "channel"; }
+};
+
+struct ModelName {
+    const char* operator()(const Newtonian&) const { return "newtonian"; }
+    const char* operator()(const PowerLaw&) const { return "power_law"; }
+    const char* operator()(const Carreau&) const { return "carreau"; }
+    const char* operator()(const HerschelBulkley&) const { return "herschel_bulkley"; }
+};
+
+// The class a pointer to a double member belongs to.
+template <class Member>
+struct OwnerOf;
+template <class Owner>
+struct OwnerOf<double Owner::*> {
+    using type = Owner;
+};
+
+// The member of whichever of `Members`' classes `object` holds; nullptr if none.
+template <class Variant, auto... Members>
+double* heldMember(Variant& object) {
+    double* found = nullptr;
+    const auto look = [&](auto member) {
+        using Owner = typename OwnerOf<decltype(member)>::type;
+        if (Owner* owner = std::get_if<Owner>(&object); owner && !found) found = &(owner->*member);
+    };
+    (look(Members), ...);
+    return found;
+}
+
+template <auto Member>
+double* materialMember(Material& material) {
+    return &(material.*Member);
+}
+
+// The places: the material's field, or the field of each model law or solid type that holds it.
+template <auto Member>
+ParameterPlace inMaterial() {
+    return {ParameterHome::Material, {}, &materialMember<Member>, nullptr, nullptr};
+}
+template <auto... Members>
+ParameterPlace inModel() {
+    return {ParameterHome::MaterialModel, {ModelName{}(typename OwnerOf<decltype(Members)>::type{})...}, nullptr,
+            &heldMember<MaterialModel, Members...>, nullptr};
+}
+template <auto... Members>
+ParameterPlace inSolid() {
+    return {ParameterHome::Solid, {SolidName{}(typename OwnerOf<decltype(Members)>::type{})...}, nullptr, nullptr,
+            &heldMember<Solid, Members...>};
+}
+
 // Physical bounds are wide enough for any liquid and container a camera can film (ρ from oils to
 // mercury, η from water's thousandth to pitch), and narrow enough to catch a wrong unit.
 const std::vector<ParameterDeclaration> kDeclarations{
-    {"density", "ρ", "kg/m³", "Density of the liquid", ParameterHome::Material, {},
+    {"density", "ρ", "kg/m³", "Density of the liquid", inMaterial<&Material::density>(),
      kRequired, 100, 25000, true, 500, 3000, kSceneValue, false},
     {"viscosity", "η", "Pa·s", "Dynamic viscosity; a Carreau liquid's zero-shear viscosity",
-     ParameterHome::Material, {}, kRequired, 1e-6, 1e9, true, 1e-3, 1e4, 10, true},
-    {"surface_tension", "σ", "N/m", "Surface tension against air", ParameterHome::Material, {},
+     inMaterial<&Material::viscosity>(), kRequired, 1e-6, 1e9, true, 1e-3, 1e4, 10, true},
+    {"surface_tension", "σ", "N/m", "Surface tension against air", inMaterial<&Material::surfaceTension>(),
      0, 0, 1, true, 1e-4, 1, 0.05, false},
-    {"slip_length", "b", "m", "Navier slip length at solid walls (0: no slip)", ParameterHome::Material, {},
+    {"slip_length", "b", "m", "Navier slip length at solid walls (0: no slip)", inMaterial<&Material::slipLength>(),
      0, 0, 1, true, 1e-6, 1e-2, 1e-4, false},
     {"consistency", "K", "Pa·sⁿ", "Consistency of a power-law or Herschel–Bulkley liquid",
-     ParameterHome::MaterialModel, {"power_law", "herschel_bulkley"}, kRequired, 1e-6, 1e9, true, 1e-3, 1e4, 10, true},
+     inModel<&PowerLaw::consistency, &HerschelBulkley::consistency>(), kRequired, 1e-6, 1e9, true, 1e-3, 1e4, 10, true},
     {"flow_index", "n", "1", "Flow index: below 1 shear thinning, above 1 shear thickening",
-     ParameterHome::MaterialModel, {"power_law", "carreau", "herschel_bulkley"}, kRequired, 0.05, 3, true, 0.1, 2, 1,
+     inModel<&PowerLaw::index, &Carreau::index, &HerschelBulkley::index>(), kRequired, 0.05, 3, true, 0.1, 2, 1,
      false},
-    {"eta_min", "η_min", "Pa·s", "Lower cap of a power-law liquid's viscosity", ParameterHome::MaterialModel,
-     {"power_law"}, 1e-3, 1e-9, 1e12, false, 0, 0, 0, false},
+    {"eta_min", "η_min", "Pa·s", "Lower cap of a power-law liquid's viscosity", inModel<&PowerLaw::etaMin>(),
+     1e-3, 1e-9, 1e12, false, 0, 0, 0, false},
     {"eta_max", "η_max", "Pa·s",
      "Upper cap of the viscosity (a yield-stress liquid's viscosity below its yield point)",
-     ParameterHome::MaterialModel, {"power_law", "herschel_bulkley"}, 1e4, 1e-9, 1e12, false, 0, 0, 0, false},
-    {"eta_infinity", "η∞", "Pa·s", "Infinite-shear viscosity of a Carreau liquid", ParameterHome::MaterialModel,
-     {"carreau"}, 0, 0, 1e9, true, 1e-4, 1e3, 0.01, false},
+     inModel<&PowerLaw::etaMax, &HerschelBulkley::etaMax>(), 1e4, 1e-9, 1e12, false, 0, 0, 0, false},
+    {"eta_infinity", "η∞", "Pa·s", "Infinite-shear viscosity of a Carreau liquid", inModel<&Carreau::etaInfinity>(),
+     0, 0, 1e9, true, 1e-4, 1e3, 0.01, false},
     {"relaxation_time", "λ", "s", "Time constant of a Carreau liquid: thinning sets in at shear rate 1/λ",
-     ParameterHome::MaterialModel, {"carreau"}, kRequired, 1e-9, 1e6, true, 1e-3, 1e3, 1, false},
-    {"yield_stress", "τ_y", "Pa", "Yield stress of a Herschel–Bulkley liquid", ParameterHome::MaterialModel,
-     {"herschel_bulkley"}, 0, 0, 1e6, true, 1e-2, 1e3, 10, false},
+     inModel<&Carreau::relaxationTime>(), kRequired, 1e-9, 1e6, true, 1e-3, 1e3, 1, false},
+    {"yield_stress", "τ_y", "Pa", "Yield stress of a Herschel–Bulkley liquid", inModel<&HerschelBulkley::yieldStress>(),
+     0, 0, 1e6, true, 1e-2, 1e3, 10, false},
     // A solid's dimensions: searched from the scene's value, within a factor 2 unless the job says.
-    {"inner_radius", "R", "m", "Inner radius of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-4, 10, true,
+    {"inner_radius", "R", "m", "Inner radius of a cup", inSolid<&CupSolid::innerRadius>(), kRequired, 1e-4, 10, true,
      kSceneValue, kSceneValue, kSceneValue, false},
-    {"height", "H", "m", "Inner depth of a cup, from its inner bottom to its rim", ParameterHome::Solid, {"cup"}, kRequired,
-     1e-4, 10, true, kSceneValue, kSceneValue, kSceneValue, false},
-    {"wall_thickness", "t_w", "m", "Wall thickness of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-5, 1, true,
-     kSceneValue, kSceneValue, kSceneValue, false},
-    {"bottom_thickness", "t_b", "m", "Bottom thickness of a cup", ParameterHome::Solid, {"cup"}, kRequired, 1e-5, 1, true,
-     kSceneValue, kSceneValue, kSceneValue, false},
-    {"hole_radius", "r_h", "m", "Radius of the hole in a cup's bottom (0: none)", ParameterHome::Solid, {"cup"}, 0, 0, 10,
+    {"height", "H", "m", "Inner depth of a cup, from its inner bottom to its rim", inSolid<&CupSolid::height>(),
+     kRequired, 1e-4, 10, true, kSceneValue, kSceneValue, kSceneValue, false},
+    {"wall_thickness", "t_w", "m", "Wall thickness of a cup", inSolid<&CupSolid::wallThickness>(), kRequired, 1e-5, 1,
      true, kSceneValue, kSceneValue, kSceneValue, false},
-    {"width", "W", "m", "Width of a channel between its side walls", ParameterHome::Solid, {"channel"}, kRequired, 1e-4,
+    {"bottom_thickness", "t_b", "m", "Bottom thickness of a cup", inSolid<&CupSolid::bottomThickness>(), kRequired,
+     1e-5, 1, true, kSceneValue, kSceneValue, kSceneValue, false},
+    {"hole_radius", "r_h", "m", "Radius of the hole in a cup's bottom (0: none)", inSolid<&CupSolid::holeRadius>(), 0,
+     0, 10, true, kSceneValue, kSceneValue, kSceneValue, false},
+    {"width", "W", "m", "Width of a channel between its side walls", inSolid<&ChannelSolid::width>(), kRequired, 1e-4,
      100, true, kSceneValue, kSceneValue, kSceneValue, false},
 };
 
@@ -78,62 +134,15 @@ std::string format(double x) {
 
 json orNull(double x) { return std::isnan(x) ? json(nullptr) : json(x); }
 
-struct SolidName {
-    const char* operator()(const GroundSolid&) const { return "ground"; }
-    const char* operator()(const BoxSolid&) const { return "box"; }
-    const char* operator()(const CupSolid&) const { return "cup"; }
-    const char* operator()(const MeshSolid&) const { return "mesh"; }
-    const char* operator()(const ChannelSolid&) const { return "channel"; }
-};
-
-struct ModelName {
-    const char* operator()(const Newtonian&) const { return "newtonian"; }
-    const char* operator()(const PowerLaw&) const { return "power_law"; }
-    const char* operator()(const Carreau&) const { return "carreau"; }
-    const char* operator()(const HerschelBulkley&) const { return "herschel_bulkley"; }
-};
-
 // Where a declared parameter's value lives in a scene; nullptr when the scene has no such field.
 double* field(Scene& scene, const SceneParameter& p) {
-    const std::string name = p.declaration->name;
-    Material& m = scene.material;
-    switch (p.declaration->home) {
-        case ParameterHome::Material:
-            if (name == "density") return &m.density;
-            if (name == "viscosity") return &m.viscosity;
-            if (name == "surface_tension") return &m.surfaceTension;
-            if (name == "slip_length") return &m.slipLength;
-            return nullptr;
-        case ParameterHome::MaterialModel:
-            if (auto* law = std::get_if<PowerLaw>(&m.model)) {
-                if (name == "consistency") return &law->consistency;
-                if (name == "flow_index") return &law->index;
-                if (name == "eta_min") return &law->etaMin;
-                if (name == "eta_max") return &law->etaMax;
-            } else if (auto* carreau = std::get_if<Carreau>(&m.model)) {
-                if (name == "flow_index") return &carreau->index;
-                if (name == "eta_infinity") return &carreau->etaInfinity;
-                if (name == "relaxation_time") return &carreau->relaxationTime;
-            } else if (auto* hb = std::get_if<HerschelBulkley>(&m.model)) {
-                if (name == "yield_stress") return &hb->yieldStress;
-                if (name == "consistency") return &hb->consistency;
-                if (name == "flow_index") return &hb->index;
-                if (name == "eta_max") return &hb->etaMax;
-            }
-            return nullptr;
-        case ParameterHome::Solid: {
+    const ParameterPlace& place = p.declaration->place;
+    switch (place.home) {
+        case ParameterHome::Material: return place.inMaterial(scene.material);
+        case ParameterHome::MaterialModel: return place.inModel(scene.material.model);
+        case ParameterHome::Solid:
             if (p.solid < 0 || p.solid >= static_cast<int>(scene.solids.size())) return nullptr;
-            if (auto* cup = std::get_if<CupSolid>(&scene.solids[p.solid])) {
-                if (name == "inner_radius") return &cup->innerRadius;
-                if (name == "height") return &cup->height;
-                if (name == "wall_thickness") return &cup->wallThickness;
-                if (name == "bottom_thickness") return &cup->bottomThickness;
-                if (name == "hole_radius") return &cup->holeRadius;
-            } else if (auto* channel = std::get_if<ChannelSolid>(&scene.solids[p.solid])) {
-                if (name == "width") return &channel->width;
-            }
-            return nullptr;
-        }
+            return place.inSolid(scene.solids[p.solid]);
     }
     return nullptr;
 }
@@ -175,12 +184,12 @@ json parameterSchema() {
                    {"symbol", d.symbol},
                    {"unit", d.unit},
                    {"description", d.description},
-                   {"home", homeName(d.home)},
+                   {"home", homeName(d.place.home)},
                    {"default", orNull(d.defaultValue)},
                    {"lower", d.lower},
                    {"upper", d.upper},
                    {"searchable", d.searchable}};
-        if (!d.types.empty()) entry["types"] = d.types;
+        if (!d.place.types.empty()) entry["types"] = d.place.types;
         if (d.searchable)
             entry["search"] = {{"lower", orNull(d.searchLower)},
                                {"upper", orNull(d.searchUpper)},
@@ -218,9 +227,9 @@ SceneParameter resolveParameter(const Scene& scene, const std::string& name, con
         key = name.substr(close + 2);
     }
     p.declaration = findParameterDeclaration(key);
-    if (p.declaration && p.declaration->home == ParameterHome::Solid && p.solid < 0)
+    if (p.declaration && p.declaration->place.home == ParameterHome::Solid && p.solid < 0)
         throw InputError(where + ": \"" + name + "\" is a solid's: name it \"solids[i]." + name + "\", i its index");
-    if (!p.declaration || (p.declaration->home == ParameterHome::Solid) != (p.solid >= 0)) {
+    if (!p.declaration || (p.declaration->place.home == ParameterHome::Solid) != (p.solid >= 0)) {
         std::vector<std::string> names;
         for (const ParameterDeclaration& d : kDeclarations) names.push_back(d.name);
         const std::string near = nearestName(key, names);
@@ -229,8 +238,8 @@ SceneParameter resolveParameter(const Scene& scene, const std::string& name, con
     }
     if (!field(const_cast<Scene&>(scene), p)) {
         std::string types;
-        for (const char* t : p.declaration->types) types += std::string(types.empty() ? "" : " or ") + t;
-        if (p.declaration->home == ParameterHome::Solid)
+        for (const char* t : p.declaration->place.types) types += std::string(types.empty() ? "" : " or ") + t;
+        if (p.declaration->place.home == ParameterHome::Solid)
             throw InputError(where + ": \"" + name + "\": solids[" + std::to_string(p.solid) + "] is a " +
                              std::visit(SolidName{}, scene.solids[p.solid]) + ", and only a " + types + " has it");
         throw InputError(where + ": \"" + name + "\": the scene's material model is " +

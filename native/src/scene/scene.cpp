@@ -169,6 +169,18 @@ void requireInDomain(const FieldReader& r, const Solid& solid, const Domain& d) 
     }
 }
 
+template <class Object>
+using Locator = double* (*)(Object&);
+
+// Every declared parameter `object` holds (located by `locator`: &ParameterPlace::inModel, …), read
+// from `r`, its declared default where it is absent.
+template <class Object>
+void readDeclared(const FieldReader& r, Object& object, Locator<Object> ParameterPlace::*locator) {
+    for (const ParameterDeclaration& d : parameterDeclarations())
+        if (const Locator<Object> locate = d.place.*locator)
+            if (double* value = locate(object)) *value = r.parameter(d.name);
+}
+
 Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
     const std::string type = r.string("type");
     if (type == "ground") return GroundSolid{r.number("height", 0.0)};
@@ -178,18 +190,14 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
         return box;
     }
     if (type == "cup") {
-        CupSolid cup;
-        cup.position = r.vec3("position");
-        cup.innerRadius = r.parameter("inner_radius");
-        cup.height = r.parameter("height");
-        cup.wallThickness = r.parameter("wall_thickness");
-        cup.bottomThickness = r.parameter("bottom_thickness");
-        cup.holeRadius = r.parameter("hole_radius");
+        Solid solid = CupSolid{r.vec3("position")};
+        readDeclared(r, solid, &ParameterPlace::inSolid);
+        const CupSolid& cup = std::get<CupSolid>(solid);
         if (cup.holeRadius >= cup.innerRadius)
             r.fail("hole_radius", "must be smaller than inner_radius (" +
                                       formatNumber(cup.innerRadius) + "), got " +
                                       formatNumber(cup.holeRadius));
-        return cup;
+        return solid;
     }
     if (type == "mesh") {
         std::filesystem::path path = r.string("path");
@@ -203,7 +211,11 @@ Solid parseSolid(const FieldReader& r, const std::filesystem::path& baseDir) {
             r.fail("path", "mesh must be .obj or .ply, got '" + path.filename().string() + "'");
         return MeshSolid{path};
     }
-    if (type == "channel") return ChannelSolid{r.number("center_y", 0.0), r.parameter("width")};
+    if (type == "channel") {
+        Solid solid = ChannelSolid{r.number("center_y", 0.0)};
+        readDeclared(r, solid, &ParameterPlace::inSolid);
+        return solid;
+    }
     r.fail("type", "unknown solid type '" + type + "' (ground, box, cup, mesh, channel)");
 }
 
@@ -245,20 +257,16 @@ LiquidSource parseLiquid(const FieldReader& r, const std::vector<Solid>& solids)
 
 MaterialModel parseModel(const FieldReader& r) {
     const std::string type = r.string("type");
-    if (type == "newtonian") return Newtonian{};
-    if (type == "power_law") {
-        PowerLaw m{r.parameter("consistency"), r.parameter("flow_index"), r.parameter("eta_min"),
-                   r.parameter("eta_max")};
-        if (m.etaMin >= m.etaMax) r.fail("eta_max", "must be greater than eta_min");
-        return m;
-    }
-    if (type == "carreau")
-        return Carreau{r.parameter("eta_infinity"), r.parameter("relaxation_time"), r.parameter("flow_index")};
-    if (type == "herschel_bulkley")
-        return HerschelBulkley{r.parameter("yield_stress"), r.parameter("consistency"), r.parameter("flow_index"),
-                               r.parameter("eta_max")};
-    r.fail("type", "unknown material model '" + type +
-                       "' (newtonian, power_law, carreau, herschel_bulkley)");
+    MaterialModel model;
+    if (type == "power_law") model = PowerLaw{};
+    else if (type == "carreau") model = Carreau{};
+    else if (type == "herschel_bulkley") model = HerschelBulkley{};
+    else if (type != "newtonian")
+        r.fail("type", "unknown material model '" + type + "' (newtonian, power_law, carreau, herschel_bulkley)");
+    readDeclared(r, model, &ParameterPlace::inModel);
+    if (const auto* law = std::get_if<PowerLaw>(&model); law && law->etaMin >= law->etaMax)
+        r.fail("eta_max", "must be greater than eta_min");
+    return model;
 }
 
 }  // namespace
@@ -356,10 +364,7 @@ Scene parseScene(const json& doc, const std::string& origin, const std::filesyst
     }
 
     const FieldReader material = root.child("material");
-    scene.material.density = material.parameter("density");
-    scene.material.viscosity = material.parameter("viscosity");
-    scene.material.surfaceTension = material.parameter("surface_tension");
-    scene.material.slipLength = material.parameter("slip_length");
+    readDeclared(material, scene.material, &ParameterPlace::inMaterial);
     if (material.has("model")) {
         const FieldReader model = material.child("model");
         scene.material.model = parseModel(model);
@@ -444,16 +449,9 @@ struct SolidWriter {
     json operator()(const BoxSolid& b) const {
         return {{"type", "box"}, {"min", toJson(b.min)}, {"max", toJson(b.max)}};
     }
-    json operator()(const CupSolid& c) const {
-        return {{"type", "cup"},          {"position", toJson(c.position)},
-                {"inner_radius", c.innerRadius}, {"height", c.height},
-                {"wall_thickness", c.wallThickness}, {"bottom_thickness", c.bottomThickness},
-                {"hole_radius", c.holeRadius}};
-    }
+    json operator()(const CupSolid& c) const { return {{"type", "cup"}, {"position", toJson(c.position)}}; }
     json operator()(const MeshSolid& m) const { return {{"type", "mesh"}, {"path", m.path.string()}}; }
-    json operator()(const ChannelSolid& c) const {
-        return {{"type", "channel"}, {"center_y", c.centerY}, {"width", c.width}};
-    }
+    json operator()(const ChannelSolid& c) const { return {{"type", "channel"}, {"center_y", c.centerY}}; }
 };
 struct LiquidWriter {
     json operator()(const LiquidBox& b) const {
@@ -469,25 +467,25 @@ struct LiquidWriter {
 };
 struct ModelWriter {
     json operator()(const Newtonian&) const { return {{"type", "newtonian"}}; }
-    json operator()(const PowerLaw& m) const {
-        return {{"type", "power_law"}, {"consistency", m.consistency}, {"flow_index", m.index},
-                {"eta_min", m.etaMin}, {"eta_max", m.etaMax}};
-    }
-    json operator()(const Carreau& m) const {
-        return {{"type", "carreau"}, {"eta_infinity", m.etaInfinity},
-                {"relaxation_time", m.relaxationTime}, {"flow_index", m.index}};
-    }
-    json operator()(const HerschelBulkley& m) const {
-        return {{"type", "herschel_bulkley"}, {"yield_stress", m.yieldStress},
-                {"consistency", m.consistency}, {"flow_index", m.index}, {"eta_max", m.etaMax}};
-    }
+    json operator()(const PowerLaw&) const { return {{"type", "power_law"}}; }
+    json operator()(const Carreau&) const { return {{"type", "carreau"}}; }
+    json operator()(const HerschelBulkley&) const { return {{"type", "herschel_bulkley"}}; }
 };
+
+// `entry` (an object's fields that are not parameters) with every declared parameter `object` holds.
+template <class Object>
+json withDeclared(json entry, Object object, Locator<Object> ParameterPlace::*locator) {
+    for (const ParameterDeclaration& d : parameterDeclarations())
+        if (const Locator<Object> locate = d.place.*locator)
+            if (const double* value = locate(object)) entry[d.name] = *value;
+    return entry;
+}
 }  // namespace
 
 json sceneToJson(const Scene& s) {
     json solids = json::array(), liquids = json::array();
     for (size_t i = 0; i < s.solids.size(); ++i) {
-        solids.push_back(std::visit(SolidWriter{}, s.solids[i]));
+        solids.push_back(withDeclared(std::visit(SolidWriter{}, s.solids[i]), s.solids[i], &ParameterPlace::inSolid));
         solids.back()["transparent"] = !s.isOpaque(i);
     }
     for (const LiquidSource& liquid : s.liquids) liquids.push_back(std::visit(LiquidWriter{}, liquid));
@@ -501,12 +499,9 @@ json sceneToJson(const Scene& s) {
           {"periodic", s.domain.periodic}}},
         {"solids", solids},
         {"liquids", liquids},
-        {"material",
-         {{"density", s.material.density},
-          {"viscosity", s.material.viscosity},
-          {"surface_tension", s.material.surfaceTension},
-          {"slip_length", s.material.slipLength},
-          {"model", std::visit(ModelWriter{}, s.material.model)}}},
+        {"material", withDeclared({{"model", withDeclared(std::visit(ModelWriter{}, s.material.model), s.material.model,
+                                                          &ParameterPlace::inModel)}},
+                                  s.material, &ParameterPlace::inMaterial)},
         {"gravity", toJson(s.gravity)},
         {"fps", s.fps},
         {"frames", s.frames},

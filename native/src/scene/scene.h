@@ -208,13 +208,23 @@ enum class ParameterHome {
     Solid,          // solids[i].NAME, for the solid types in `types`; a job names it "solids[i].NAME"
 };
 
+// Where a declared parameter's value lives, which is how the scene reader reads it, the writer writes
+// it and a job sets it: the one locator of its home, nullptr where the object cannot hold it (a
+// Newtonian model and "flow_index").
+struct ParameterPlace {
+    ParameterHome home;
+    std::vector<const char*> types;  // the model or solid types that hold it
+    double* (*inMaterial)(Material&) = nullptr;
+    double* (*inModel)(MaterialModel&) = nullptr;
+    double* (*inSolid)(Solid&) = nullptr;
+};
+
 struct ParameterDeclaration {
     const char* name;    // the scene file's key, and the job's name for it
     const char* symbol;  // as the panel shows it
     const char* unit;    // SI
     const char* description;
-    ParameterHome home;
-    std::vector<const char*> types;   // the model or solid types that hold it
+    ParameterPlace place;
     double defaultValue;              // NaN: required
     double lower, upper;              // physical bounds, inclusive: the readers refuse values outside
     bool searchable;                  // a job may search it (in ln θ: searchLower > 0)

@@ -31,6 +31,14 @@ double MaterialLaw::viscosity(double shearRate) const {
                       material_.model);
 }
 
+std::optional<YieldingPowerLaw> MaterialLaw::yieldingPowerLaw() const {
+    if (const auto* law = std::get_if<PowerLaw>(&material_.model)) return YieldingPowerLaw{0, law->consistency, law->index};
+    if (const auto* hb = std::get_if<HerschelBulkley>(&material_.model))
+        return YieldingPowerLaw{hb->yieldStress, hb->consistency, hb->index};
+    if (std::holds_alternative<Newtonian>(material_.model)) return YieldingPowerLaw{0, material_.viscosity, 1};
+    return std::nullopt;
+}
+
 double updateViscosity(const MaterialLaw& law, double viscosity, const StokesProblem& problem,
                        const std::array<Field, 3>& velocity, Field& cellViscosity,
                        std::array<Field, 3>& edgeViscosity) {

@@ -6,8 +6,14 @@
 #include "sim/stokes_solver.h"
 
 #include <array>
+#include <optional>
 
 namespace viscoscope::sim {
+
+// τ = τ_y + K γ̇ⁿ above the yield stress, the liquid at rest below it.
+struct YieldingPowerLaw {
+    double yieldStress = 0, consistency = 1, index = 1;
+};
 
 class MaterialLaw {
 public:
@@ -15,6 +21,9 @@ public:
     bool shearDependent() const { return !std::holds_alternative<Newtonian>(material_.model); }
     // Dynamic viscosity (Pa·s) at shear rate γ̇ = sqrt(2 D:D) (1/s).
     double viscosity(double shearRate) const;
+    // The law as τ_y + K γ̇ⁿ without the caps on η a grid solve needs (a Newtonian liquid: 0, η, 1),
+    // for a model that solves the flow analytically (the thin film); none for a Carreau liquid.
+    std::optional<YieldingPowerLaw> yieldingPowerLaw() const;
 
 private:
     Material material_;
