@@ -41,6 +41,8 @@ def describe_model(entry):
         line += "; earns its parameters" if entry["earns_its_parameters"] else "; does not earn its parameters"
     if entry.get("effect_vanishes"):
         line += " (it ended where its effect vanishes: the base model)"
+    for doubt in entry["doubts"]:
+        line += "; doubted: " + doubt
     return line
 
 

@@ -118,13 +118,15 @@ TEST_F(Conclusion, NamesNothingAgainstABaseCutShort) {
 }
 
 TEST_F(Conclusion, SaysWhatBudgetWouldHoldTheCandidatesItLeftUnfitted) {
-    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
     timeBudget_ = 480;
-    const auto c = conclude(base, {}, scatteredBy(1.01), {}, {4, 2399.6});
+    // The base cut short too: the budget that holds the candidates is what would tell, not twice this one.
+    const auto c = conclude(fitOf("base", 0.10, -50, identify::StopReason::TimeBudget), {}, scatteredBy(1.01), {},
+                            {4, 2399.6});
     EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
     EXPECT_NE(c.sentence.find("4 candidates"), std::string::npos) << c.sentence;
     EXPECT_NE(c.sentence.find("2400 s"), std::string::npos) << c.sentence;
     EXPECT_TRUE(mentions(c.whatWouldTell, "fewer --effects"));
+    EXPECT_FALSE(mentions(c.whatWouldTell, "twice this one"));
     EXPECT_EQ(c.suggestedSettings.value("time_budget_s", 0), 2400);
 }
 

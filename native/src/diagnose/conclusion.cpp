@@ -51,13 +51,15 @@ void lessScatter(const Job& job, Conclusion& conclusion) {
     conclusion.suggestedSettings["grid_placements"] = 2 * job.gridPlacements;
 }
 
-// More time for fits cut short: twice the budget, the fits' own minimum not being known.
+// More time for fits cut short: twice the budget, the fits' own minimum not being known (nothing
+// more where a budget predicted to hold the candidates is suggested already).
 void moreTime(double timeBudget, Conclusion& conclusion) {
+    if (conclusion.suggestedSettings.contains("time_budget_s")) return;
     if (timeBudget > 0) {
         const long twice = wholeSecondsOver(2 * timeBudget);
         addOnce(conclusion.whatWouldTell, {"more time for each fit (a --time-budget of " + std::to_string(twice) +
                                            " s, twice this one, or 0 to give each fit the job's own)"});
-        if (!conclusion.suggestedSettings.contains("time_budget_s")) conclusion.suggestedSettings["time_budget_s"] = twice;
+        conclusion.suggestedSettings["time_budget_s"] = twice;
     } else {
         addOnce(conclusion.whatWouldTell, {"more generations for each fit (max_generations, time_budget_s)"});
     }

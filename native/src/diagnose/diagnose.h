@@ -64,6 +64,7 @@ struct ModelFit {
     double scoringSeconds = 0;   // θ* simulated again over every frame of every run
     double timeBudget = 0;       // the search's share of the diagnosis's budget (0: the job's own)
     std::optional<identify::StopReason> stop;  // why the search ended; none when there was nothing to search
+    std::vector<std::string> doubts;  // why its search's result is probably wrong (result.json's doubts)
     // The material θ* implies, as a scene file's "material" holds it: what the add-on applies.
     nlohmann::json material;
     // Its search ran to its own end (a tolerance or the job's max_generations), or there was nothing

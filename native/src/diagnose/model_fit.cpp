@@ -175,6 +175,7 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
         fit.evaluations = result.evaluations;
         fit.seconds = result.seconds;
         fit.stop = result.stop;
+        fit.doubts = result.document.at("doubts").get<std::vector<std::string>>();
     }
     fit.material = sceneToJson(sceneWithParameters(full, fit.theta, full.resolution)).at("material");
     const std::vector<Job> runs = runsOf(full);
@@ -238,7 +239,8 @@ json toJson(const ModelFit& fit, const json& series, const std::string& folder) 
              {"held_out_E", fit.heldOutE}, {"whole_E", fit.wholeE},      {"bic", fit.bic},
              {"evaluations", fit.evaluations}, {"seconds", fit.seconds}, {"scoring_seconds", fit.scoringSeconds},
              {"time_budget_s", fit.timeBudget},   {"material", fit.material},
-             {"folder", "fits/" + folder},        {"residual_over_time", series}};
+             {"folder", "fits/" + folder},        {"residual_over_time", series},
+             {"doubts", fit.doubts}};
     if (fit.trackError) doc["track_error"] = *fit.trackError;
     if (fit.shearRate) doc["shear_rate_per_s"] = *fit.shearRate;
     if (fit.stop) doc["stopped"] = toString(*fit.stop);
