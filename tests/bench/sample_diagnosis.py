@@ -18,6 +18,7 @@ within 30 minutes on a 2-core machine).
 import argparse
 import json
 import pathlib
+import shutil
 import subprocess
 import sys
 import time
@@ -68,6 +69,8 @@ def main():
            "resolution": args.resolution, "grid_placements": 2, "seed": 3}
     (work / "job.json").write_text(json.dumps(job, indent=1))
     out = work / "diagnosis"
+    # A fresh diagnosis: diagnose resumes each fit from a checkpoint it finds there.
+    shutil.rmtree(out, ignore_errors=True)
     seconds = run([args.engine, "diagnose", work / "job.json", "--out", out, "--time-budget", args.budget,
                    "--threads", args.threads, "--progress", "none", "--no-plots"]
                   + (["--effects", args.effects] if args.effects else []), "diagnose")
