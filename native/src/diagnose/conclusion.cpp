@@ -128,9 +128,9 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
     if (unfitted.candidates > 0) {
         const long neededSeconds = wholeSecondsOver(unfitted.budgetNeeded);
         const std::string needed = std::to_string(neededSeconds);
-        const std::string fits = unfitted.candidates == 1 ? "the candidate's least fit"
-                                                          : "the " + std::to_string(unfitted.candidates) + " candidates' least fits";
-        why.push_back("the time budget held the base fit but not " + fits + ", which a budget of about " + needed +
+        const std::string fits = unfitted.candidates == 1 ? "the least fit of one candidate"
+                                                          : "the least fits of " + std::to_string(unfitted.candidates) + " candidates";
+        why.push_back("the time budget could not hold " + fits + ", which a budget of about " + needed +
                       " s would hold on this machine");
         addOnce(conclusion.whatWouldTell, {"a --time-budget of at least " + needed + " s, or fewer --effects"});
         conclusion.suggestedSettings["time_budget_s"] = neededSeconds;

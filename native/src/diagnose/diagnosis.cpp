@@ -203,29 +203,39 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
     std::vector<Candidate> fitted(candidates.size());  // each candidate as it is fitted
     for (size_t c = 0; c < candidates.size(); ++c) candidateFor(*candidates[c], baseFit, fitted[c]);
-    // Before the candidates' hours: whether the budget holds their least fits (predicted from the
-    // base's), with the noise floor's scorings (each as long as the base's). Where it does not, the
-    // conclusion cannot be other than "cannot tell", and the diagnosis says what budget would tell.
+    // Before the candidates' hours, and again before each: whether the budget holds the least fits
+    // of those left at the dearest cost measured so far (the base's at first; a material law's
+    // evaluation and scoring cost more than a Newtonian one's, so each fitted candidate may raise
+    // it), and before the first the noise floor's scorings too (each as long as the base's). Those
+    // it cannot hold are not fitted: the conclusion cannot then be "no missing effect", and it says
+    // what budget would hold them.
+    FitCost cost = FitCost::of(diagnosis.base);
     const int replicas = std::max(0, options.scatterReplicas);
     const double noiseSeconds = replicas * diagnosis.base.scoringSeconds;
-    std::vector<double> leastSeconds;
-    for (const Candidate& candidate : fitted)
-        leastSeconds.push_back(leastFitSeconds(job, diagnosis.base, int(candidate.parameters.size())));
-    const double leastCandidates = std::accumulate(leastSeconds.begin(), leastSeconds.end(), 0.0);
     Unfitted beyondBudget;
-    if (!budget.holds(noiseSeconds + leastCandidates)) {
-        beyondBudget = {int(candidates.size()), budget.spent() + noiseSeconds + leastCandidates};
-        for (size_t c = 0; c < candidates.size(); ++c)
+    const auto budgetHoldsFrom = [&](size_t first, double besides) {
+        std::vector<double> least;
+        for (size_t c = first; c < fitted.size(); ++c) least.push_back(cost.leastFit(job, int(fitted[c].parameters.size())));
+        const double needed = std::accumulate(least.begin(), least.end(), besides);
+        if (budget.holds(needed)) return true;
+        beyondBudget = {int(least.size()), budget.spent() + needed};
+        std::string names;
+        for (size_t c = first; c < candidates.size(); ++c) {
+            names += (names.empty() ? "" : ", ") + candidates[c]->name;
             refused.emplace_back(candidates[c]->name, "the time budget: its fit takes about " +
-                                                          std::to_string(std::lround(leastSeconds[c])) +
-                                                          " s at least (at the base's cost an evaluation), more than "
-                                                          "the budget had left");
-        warn("diagnose: the time budget holds the base fit but not the candidates' least fits: no candidate is fitted "
-             "(a --time-budget of about " + std::to_string(std::lround(beyondBudget.budgetNeeded)) + " s or more, or fewer --effects)");
-        steps -= int(candidates.size());
-        candidates.clear();
-        fitted.clear();
-    }
+                                                          std::to_string(std::lround(least[c - first])) +
+                                                          " s at least (at the cost of the fits before it), more "
+                                                          "than the budget had left");
+        }
+        warn("diagnose: the time budget cannot hold the least fits of " + names + ": they are not fitted (a "
+             "--time-budget of about " + std::to_string(std::lround(beyondBudget.budgetNeeded)) +
+             " s or more, or fewer --effects)");
+        steps -= int(least.size());
+        candidates.resize(first);
+        fitted.resize(first);
+        return false;
+    };
+    budgetHoldsFrom(0, noiseSeconds);
     if (measuresScatter && options.onFit) options.onFit("noise_floor", step++, steps, {});
     diagnosis.noise = measureScatter(job, observations, fitCounts, diagnosis.base, budget.holds(noiseSeconds) ? replicas : 0);
     budget.spend(diagnosis.noise);
@@ -234,6 +244,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     std::vector<Job> models;                       // each candidate's job over all frames
     std::vector<std::vector<double>> equivalents;  // each candidate's base-equivalent point
     for (size_t c = 0; c < candidates.size(); ++c) {
+        if (c > 0 && !budgetHoldsFrom(c, 0)) break;
         const Effect& effect = *candidates[c];
         const Candidate& candidate = fitted[c];
         const json& parameters = candidate.parameters;
@@ -259,6 +270,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         diagnosis.candidates.push_back(fitModel(effect.name, full, fitting, observations, fitCounts,
                                                 outDir / "fits" / effect.name, identifyOptions, budget.nextSearch(), series));
         budget.spend(diagnosis.candidates.back());
+        cost.raiseTo(FitCost::of(diagnosis.candidates.back()));
         candidateSeries.push_back(series);
     }
 
@@ -277,7 +289,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
             challenger = c;
     std::string baseFolder = "base";
     json baseRefit;
-    if (challenger && !job.parameters.empty()) {
+    const double leastRefit = FitCost::of(diagnosis.base).leastFit(job, int(job.parameters.size()));
+    if (challenger && !job.parameters.empty() && !budget.holds(leastRefit))
+        warn("diagnose: no time left to refit the base (about " + std::to_string(std::lround(leastRefit)) +
+             " s at least): the candidates are judged against the first base fit");
+    else if (challenger && !job.parameters.empty()) {
         const ModelFit& from = diagnosis.candidates[*challenger];
         const std::vector<double> start = apparentBase(from, models[*challenger], job);
         json parameters = json::array();

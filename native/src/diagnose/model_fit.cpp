@@ -200,11 +200,18 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
     return fit;
 }
 
-double leastFitSeconds(const Job& job, const ModelFit& base, int dimension) {
-    if (base.evaluations <= 0) return 0;
-    const double perEvaluation = base.seconds / base.evaluations;
+FitCost FitCost::of(const ModelFit& fit) {
+    return {fit.evaluations > 0 ? fit.seconds / fit.evaluations : 0.0, fit.scoringSeconds};
+}
+
+void FitCost::raiseTo(const FitCost& other) {
+    perEvaluation = std::max(perEvaluation, other.perEvaluation);
+    scoring = std::max(scoring, other.scoring);
+}
+
+double FitCost::leastFit(const Job& job, int dimension) const {
     const int generation = populationSize(dimension, {job.populationSize});
-    return (job.fidelity.minFineGenerations * generation + 1) * perEvaluation + base.scoringSeconds;
+    return (job.fidelity.minFineGenerations * generation + 1) * perEvaluation + scoring;
 }
 
 bool ModelFit::searchCompleted() const {

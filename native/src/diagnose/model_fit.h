@@ -49,11 +49,17 @@ class FitBudget {
     int fitsLeft_;
 };
 
-// The least wall seconds a fit over `dimension` parameters takes in `job`, predicted from the base
-// fit's search and scoring: its minimum generations of λ evaluations (one more in the first, for its
-// known point) at the base's wall seconds an evaluation, and a scoring as long as the base's. 0 when
-// the base searched nothing.
-double leastFitSeconds(const identify::Job& job, const ModelFit& base, int dimension);
+// What a fit costs on this machine: the wall seconds of an evaluation of its search and of its
+// scoring.
+struct FitCost {
+    double perEvaluation = 0, scoring = 0;
+    static FitCost of(const ModelFit& fit);  // as measured (no evaluation cost for a fit that searched nothing)
+    // The dearer of the two in each part: the fits measured so far predict the next.
+    void raiseTo(const FitCost& other);
+    // The least wall seconds of a fit over `dimension` parameters in `job`: its minimum generations
+    // of λ evaluations (one more in the first, for its known point) and its scoring.
+    double leastFit(const identify::Job& job, int dimension) const;
+};
 
 // Fits a model (`fitting`: its job over the fitted frames) with `identifyOptions`' known point and
 // start curve, if given, within `searchBudget` wall seconds (0: the job's), then scores θ* on every
