@@ -36,7 +36,8 @@ struct DiagnoseOptions {
     const std::vector<Effect>* catalogue = nullptr;
     // Wall seconds for the whole diagnosis (0: each fit has the job's own time_budget_s). Each fit's
     // search gets an equal share of what the fits before it left, less the time its scoring on
-    // every frame is predicted to take.
+    // every frame is predicted to take; candidates whose least fits the rest cannot hold, predicted
+    // from the fits before them, are not fitted.
     double timeBudget = 0;
     // Further scorings of the base's θ* on other particle seeds and grid placements, for the noise
     // floor (a thin film has none to measure: its model is deterministic).
