@@ -184,10 +184,11 @@ class VISCOSCOPE_OT_use_suggestion(bpy.types.Operator):
 
     def execute(self, context):
         vs = context.scene.viscoscope
-        for setting, value, text in suggestions(vs):
+        for setting, value, _text in suggestions(vs):
             if setting == self.setting:
-                setattr(vs, SUGGESTIONS[setting][0], value)
-                self.report({'INFO'}, text.replace("Set ", "", 1).replace(" to ", " set to ", 1))
+                prop = SUGGESTIONS[setting][0]
+                setattr(vs, prop, value)
+                self.report({'INFO'}, "%s set to %s" % (vs.bl_rna.properties[prop].name, value))
                 return {'FINISHED'}
         self.report({'ERROR'}, "the diagnosis suggests no %s the panel can set" % self.setting)
         return {'CANCELLED'}
