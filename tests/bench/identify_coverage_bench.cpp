@@ -1,8 +1,8 @@
 // How often identify's interval holds the truth (issue 89): the collapsing column's front, measured
 // like a lab's from reference runs at another resolution and particle seed than the job's, for
 // several η and seeds; each identified on the job's grid. Prints a row per reference (η*, the
-// interval, whether it holds the truth, its width in ln η, the interval's method) and the coverage
-// and mean width over all of them.
+// resolution check's grid error in ln η, the interval, whether it holds the truth, its width in
+// ln η, the interval's method) and the coverage and mean width over all of them.
 //
 //   identify_coverage_bench [--etas 2,5,12] [--seeds 11,12,13,14] [--resolution 20]
 //                           [--reference-resolution 24] [--generations 12] [--threads 0] [--keep DIR]
@@ -41,7 +41,8 @@ int main(int argc, char** argv) {
     const Eigen::Vector3d gate(0.035, 0.02, 0), wall(0, 0.02, 0);
     int held = 0, count = 0;
     double widthSum = 0;
-    std::printf("%8s %6s %10s %22s %6s %10s %s\n", "eta", "seed", "eta*", "interval", "holds", "ln width", "method");
+    std::printf("%8s %6s %10s %10s %22s %6s %10s %s\n", "eta", "seed", "eta*", "grid error", "interval", "holds",
+                "ln width", "method");
     for (double eta : etas)
         for (unsigned seed : seeds) {
             const fs::path dir = root / ("eta" + std::to_string(eta) + "_seed" + std::to_string(seed));
@@ -63,8 +64,10 @@ int main(int argc, char** argv) {
             held += holds;
             ++count;
             widthSum += std::log(high / low);
-            std::printf("%8.3g %6u %10.4g [%9.4g, %9.4g] %6s %10.3f %s\n", eta, seed, r.theta[0], low, high,
-                        holds ? "yes" : "no", std::log(high / low), r.intervalMethod.c_str());
+            const json& check = r.document.at("viscosity").value("resolution_check", json::object());
+            const double gridError = check.value("error_ln", NAN);
+            std::printf("%8.3g %6u %10.4g %10.4g [%9.4g, %9.4g] %6s %10.3f %s\n", eta, seed, r.theta[0], gridError, low,
+                        high, holds ? "yes" : "no", std::log(high / low), r.intervalMethod.c_str());
             std::fflush(stdout);
         }
     std::printf("coverage %d/%d = %.0f %%, mean ln width %.3f\n", held, count, 100.0 * held / count, widthSum / count);

@@ -186,6 +186,9 @@ TEST_F(CliIdentify, BadJobsFailFastWithExitCode2) {
         json doc = job();
         doc["alignment_check"] = "yes";
         expectBadInput(writeJob(doc, "alignment.json"), "alignment_check: must be true or false");
+        doc.erase("alignment_check");
+        doc["resolution_check"] = 1;
+        expectBadInput(writeJob(doc, "resolution.json"), "resolution_check: must be true or false");
     }
     {  // a measured area track that never leaves 0
         std::ofstream(dir_ / "flat_track.csv") << "time_s,area_px\n0,0\n10,0\n";

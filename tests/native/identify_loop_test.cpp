@@ -334,7 +334,20 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     const double spread = std::abs(std::log(check.at("theta_min").get<double>() / result.theta[0]));
     EXPECT_LE(result.interval[0][0], result.theta[0] * std::exp(-spread) * (1 + 1e-12));
     EXPECT_GE(result.interval[0][1], result.theta[0] * std::exp(spread) * (1 - 1e-12));
-    EXPECT_EQ(result.intervalMethod, "profile+alignment");
+    // The resolution check scores the same two points on both placements of a grid of 0.8× the cells,
+    // and the interval holds θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|) of its minimum θ_c.
+    const json& coarser = result.document.at("viscosity").at("resolution_check");
+    std::printf("[ identify ] resolution check: %s\n", coarser.dump().c_str());
+    ASSERT_TRUE(coarser.contains("theta_min")) << coarser.dump();
+    const int cells = coarser.at("resolution").get<int>();
+    EXPECT_EQ(cells, 16);
+    EXPECT_EQ(coarser.at("theta"), check.at("theta"));
+    const double gridError = double(cells) / (20 - cells) *
+                             std::abs(std::log(check.at("theta_min").get<double>() / coarser.at("theta_min").get<double>()));
+    EXPECT_NEAR(coarser.at("error_ln").get<double>(), gridError, 1e-12);
+    EXPECT_LE(result.interval[0][0], result.theta[0] * std::exp(-gridError) * (1 + 1e-12));
+    EXPECT_GE(result.interval[0][1], result.theta[0] * std::exp(gridError) * (1 - 1e-12));
+    EXPECT_EQ(result.intervalMethod, "profile+alignment+resolution");
     EXPECT_TRUE(fs::exists(dir_ / "out" / "result.json"));
     EXPECT_TRUE(fs::exists(dir_ / "out" / "checkpoint.json"));
     // Re-running a finished job does not simulate again and gives the same answer.
@@ -344,6 +357,9 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     const json& checkAgain = again.document.at("viscosity").at("alignment_check");
     EXPECT_TRUE(checkAgain.at("from_checkpoint").get<bool>());
     EXPECT_EQ(checkAgain.at("E"), check.at("E"));
+    const json& coarserAgain = again.document.at("viscosity").at("resolution_check");
+    EXPECT_TRUE(coarserAgain.at("from_checkpoint").get<bool>());
+    EXPECT_EQ(coarserAgain.at("E"), coarser.at("E"));
     EXPECT_EQ(again.interval, result.interval);
 }
 
@@ -369,16 +385,18 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
         for (const json& w : warnings) count += w.get<std::string>().rfind("time_budget_s:", 0) == 0;
         return count;
     };
-    // ... and, at the end, that the alignment check does not fit either.
+    // ... and, at the end, that the alignment check does not fit either (nor, without its minimum to
+    // compare with, the resolution check).
     ASSERT_EQ(warned.size(), 2u);
     EXPECT_EQ(warned[0].rfind("time_budget_s: the 2 full-fidelity generations", 0), 0u) << warned[0];
     EXPECT_EQ(warned[1].rfind("alignment_check: skipped", 0), 0u) << warned[1];
     EXPECT_TRUE(result.document.at("viscosity").at("alignment_check").contains("skipped"));
+    EXPECT_TRUE(result.document.at("viscosity").at("resolution_check").contains("skipped"));
     // Without it the interval leaves out the grid's share: the result is doubted.
     EXPECT_EQ(result.document.at("doubts"), json::array({warned[1]}));
     EXPECT_EQ(budgetWarnings(result.document.at("warnings")), 1);
     // After the switch the estimate covers the full-fidelity generation still to come, not the
-    // budget's spent remainder; at the end, the alignment check's two evaluations.
+    // budget's spent remainder; at the end, the grid checks' evaluations.
     ASSERT_EQ(remaining.size(), 3u);
     EXPECT_GT(remaining[0], 0.0);
     EXPECT_GT(remaining[1], remaining[2]);

@@ -223,8 +223,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     std::optional<ThreadPool> ownPool;
     EvaluationPool& pool = options.pool ? *options.pool : ownPool.emplace(options.threads);
     const bool byGeneration = placementsByGeneration(job);
-    const bool alignmentPlanned = job.alignmentCheck && n == 1;
-    TimeBudget budget(job, state, plan, pool.concurrency(), alignmentPlanned);
+    TimeBudget budget(job, state, plan, pool.concurrency());
     const auto save = [&] { checkpoint.save(state, budget.elapsed()); };
 
     // With placements by generation, full-fidelity generation g runs on the grid moved by
@@ -423,15 +422,18 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     std::vector<ParameterEstimate> estimates;
     for (int i = 0; i < n; ++i) {
         ParameterEstimate estimate = estimateParameter(job, bounds, es, state.evaluated, i, best->theta[i]);
-        if (alignmentPlanned) {
+        if (gridCheckPlanned(job, GridCheck::Alignment))
             estimate.alignment =
                 alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, budget, save);
-            // Skipped for the budget, the interval leaves out the grid's share: the result is doubted.
-            if (const std::optional<std::string>& warning = estimate.alignment->warning) {
-                doubts.push_back(*warning);
-                warn(*warning);
+        if (gridCheckPlanned(job, GridCheck::Resolution))
+            estimate.resolution = resolutionCheck(job, pool, observations, state, estimate.profile, estimate.value,
+                                                  *estimate.alignment, budget, save);
+        // Skipped for the budget, the interval leaves out the grid's share: the result is doubted.
+        for (const std::optional<GridCheckOutcome>* check : {&estimate.alignment, &estimate.resolution})
+            if (*check && (*check)->warning) {
+                doubts.push_back(*(*check)->warning);
+                warn(*(*check)->warning);
             }
-        }
         settleInterval(estimate, bounds, i);
         estimates.push_back(std::move(estimate));
     }

@@ -185,6 +185,7 @@ void requireFilmJob(Job& job, const nlohmann::json& doc, const std::string& orig
     job.gridPlacements = 1;
     job.placementSchedule = PlacementSchedule::EachEvaluation;
     job.alignmentCheck = false;
+    job.resolutionCheck = false;
 }
 
 // {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
@@ -263,7 +264,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
         throw InputError(origin + ": version: expected 1, got " + doc.value("version", nlohmann::json()).dump());
     std::vector<std::string> known{"format", "version", "parameters", "fixed", "resolution", "max_generations", "seed",
                                    "population", "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method",
-                                   "alignment_check", "grid_placements", "grid_placement_schedule",
+                                   "alignment_check", "resolution_check", "grid_placements", "grid_placement_schedule",
                                    "silhouette_comparison", "fidelity", "forward_model", "runs"};
     known.insert(known.end(), runKeys().begin(), runKeys().end());
     rejectUnknownKeys(doc, known, origin + ": ");
@@ -388,11 +389,11 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": silhouette_method: expected \"fast\" or \"exact\"");
         job.exactSilhouettes = *method == "exact";
     }
-    if (doc.contains("alignment_check")) {
-        if (!doc.at("alignment_check").is_boolean())
-            throw InputError(origin + ": alignment_check: must be true or false");
-        job.alignmentCheck = doc.at("alignment_check").get<bool>();
-    }
+    for (auto [key, check] : {std::pair{"alignment_check", &job.alignmentCheck}, {"resolution_check", &job.resolutionCheck}})
+        if (doc.contains(key)) {
+            if (!doc.at(key).is_boolean()) throw InputError(origin + ": " + key + ": must be true or false");
+            *check = doc.at(key).get<bool>();
+        }
     // Placements by generation need a one-dimensional profile of E's mean over them; a search over
     // several parameters defaults to a single placement.
     const bool oneParameter = job.parameters.size() == 1;

@@ -134,10 +134,12 @@ struct Job {
     // building the level set dominates.
     bool exactSilhouettes = true;
     SilhouetteComparison silhouetteComparison = kDefaultSilhouetteComparison;
-    // After the search, θ* is scored again on the grid moved by half a cell along x and y, with
-    // the particles seeded anew, and the interval is widened by how far that moves the minimum
-    // (see alignment_check.cpp).
+    // After a one-parameter search, θ* is scored again on the grid moved by half a cell along x and
+    // y, with the particles seeded anew, and the interval is widened by how far that moves the
+    // minimum; and on a coarser grid, and the interval reaches to where the minimum moves as the
+    // cell shrinks to nothing (see grid_checks.cpp).
     bool alignmentCheck = true;
+    bool resolutionCheck = true;
     // E is scored on this many placements of the grid, moved by k/n cells along x and y
     // (k = 0 … n − 1). Where a small feature sits against the faces then matters less: on the
     // sample cup at 48³ the minima of E on grids moved 0, ¼, ½ and ¾ cell were 105.5 / 104.3 / 95.9 /

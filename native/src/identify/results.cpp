@@ -90,7 +90,8 @@ std::vector<std::string> doubtsAfterSearch(const Job& job, const LogSearchSpace&
     return doubts;
 }
 
-json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSeconds, double alignmentSeconds) {
+json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSeconds, double alignmentSeconds,
+               double resolutionSeconds) {
     struct Sums {
         int resolution = 0, frames = 0, evaluations = 0;
         double seconds = 0, simulation = 0, silhouette = 0, fields = 0;
@@ -115,7 +116,8 @@ json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSecond
     return {{"wall_s", wallSeconds},
             {"evaluation_cpu_s", evaluationSeconds},
             {"per_fidelity", fidelities},
-            {"alignment_check_s", alignmentSeconds}};
+            {"alignment_check_s", alignmentSeconds},
+            {"resolution_check_s", resolutionSeconds}};
 }
 
 ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
@@ -146,18 +148,20 @@ void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, i
     const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
     const double value = estimate.value;
     std::array<double, 2> band = estimate.profile ? estimate.profile->interval : estimate.cma;
-    if (estimate.widenedByAlignment()) {
-        const double spread = *estimate.alignment->spread;  // |ln(θ_s/θ*)|
-        band[0] = std::min(band[0], value * std::exp(-spread));
-        band[1] = std::max(band[1], value * std::exp(spread));
-    }
+    for (const std::optional<GridCheckOutcome>* check : {&estimate.alignment, &estimate.resolution})
+        if (estimate.widenedBy(*check)) {
+            const double reach = *(*check)->widening;
+            band[0] = std::min(band[0], value * std::exp(-reach));
+            band[1] = std::max(band[1], value * std::exp(reach));
+        }
     band[0] = std::max(std::min(band[0], value), lower);
     band[1] = std::min(std::max(band[1], value), upper);
     estimate.interval = band;
 }
 
 std::string intervalMethodName(const ParameterEstimate& estimate) {
-    return std::string(estimate.profile ? "profile" : "cma") + (estimate.widenedByAlignment() ? "+alignment" : "");
+    return std::string(estimate.profile ? "profile" : "cma") + (estimate.widenedBy(estimate.alignment) ? "+alignment" : "") +
+           (estimate.widenedBy(estimate.resolution) ? "+resolution" : "");
 }
 
 namespace {
@@ -177,15 +181,19 @@ json parameterEntry(const Job& job, const LogSearchSpace& bounds, const Paramete
     }
     entry["value"] = estimate.value;
     if (estimate.alignment) entry["alignment_check"] = estimate.alignment->entry;
+    if (estimate.resolution) entry["resolution_check"] = estimate.resolution->entry;
     entry["interval"] = estimate.interval;
     std::string method = estimate.profile ? "profile: parabola fit of E against 1/η (ln θ for other parameters) "
                                             "over full-fidelity evaluations within ±0.5 in ln θ of the best "
                                             "one, band where it is within ΔE = max(2·jitter, 1 % E_min) "
                                             "of its minimum"
                                           : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
-    if (estimate.widenedByAlignment())
+    if (estimate.widenedBy(estimate.alignment))
         method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
                   "and y by half a cell, or half the spacing of the grid placements (alignment_check)";
+    if (estimate.widenedBy(estimate.resolution))
+        method += "; resolution: widened to θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|), θ_c the minimum on the grids of "
+                  "cell h_c > h by the same two points (resolution_check)";
     entry["interval_method"] = method;
     return entry;
 }
@@ -198,10 +206,11 @@ json resultDocument(const Job& job, const IdentificationResult& result, const Se
                     const std::vector<std::string>& doubts) {
     const LogSearchSpace bounds = logSearchSpace(job);
     json params = json::object();
-    double alignmentCheckSeconds = 0;
+    double alignmentCheckSeconds = 0, resolutionCheckSeconds = 0;
     for (size_t i = 0; i < estimates.size(); ++i) {
         params[job.parameters[i].name()] = parameterEntry(job, bounds, estimates[i], static_cast<int>(i));
         if (estimates[i].alignment) alignmentCheckSeconds += estimates[i].alignment->seconds;
+        if (estimates[i].resolution) resolutionCheckSeconds += estimates[i].resolution->seconds;
     }
     json fixedParameters = json::object();
     for (const FixedParameter& f : job.fixed)
@@ -247,7 +256,7 @@ json resultDocument(const Job& job, const IdentificationResult& result, const Se
                {"reference_liquid_out_of_view_share", obs.referenceOutOfView}}},
              {"history", history},
              {"evaluated", evaluated},
-             {"timings", timingsOf(state.evaluated, result.seconds, alignmentCheckSeconds)}};
+             {"timings", timingsOf(state.evaluated, result.seconds, alignmentCheckSeconds, resolutionCheckSeconds)}};
     if (params.contains("viscosity")) doc["viscosity"] = params["viscosity"];
     // With several runs, how well θ* fits each: its evaluation's E per run, on the placement its
     // fields come from.

@@ -147,10 +147,11 @@ std::optional<SearchState> Checkpoint::load(const Job& job) const {
     for (const json& e : cp.at("evaluated")) state.evaluated.push_back(evaluationRecordFromJson(e));
     for (const json& g : cp.at("generations")) state.generations.push_back(generationRecordFromJson(g));
     state.elapsedBefore = cp.at("elapsed_s").get<double>();
-    if (const json& a = cp.at("alignment_check"); !a.is_null())
-        state.alignment = AlignmentScores{a.at("theta").get<std::array<double, 2>>(),
-                                          {finiteOrInfinite(a.at("E")[0]), finiteOrInfinite(a.at("E")[1])},
-                                          a.at("errors").get<std::vector<std::string>>()};
+    for (auto [key, scores] : {std::pair{"alignment_check", &state.alignment}, {"resolution_check", &state.resolution}})
+        if (const json& a = cp.value(key, json()); !a.is_null())
+            *scores = CheckScores{a.at("theta").get<std::array<double, 2>>(),
+                                  {finiteOrInfinite(a.at("E")[0]), finiteOrInfinite(a.at("E")[1])},
+                                  a.at("errors").get<std::vector<std::string>>()};
     if (const json& s = cp.at("stop"); !s.is_null()) {
         for (StopReason r : {StopReason::MaxGenerations, StopReason::ToleranceX, StopReason::ToleranceFun,
                              StopReason::TimeBudget})
@@ -167,11 +168,12 @@ void Checkpoint::save(const SearchState& state, double elapsed) const {
     json evaluated = json::array(), generations = json::array();
     for (const EvaluationRecord& e : state.evaluated) evaluated.push_back(toJson(e));
     for (const GenerationRecord& g : state.generations) generations.push_back(toJson(g));
-    json alignment;
-    if (state.alignment)
-        alignment = {{"theta", state.alignment->theta},
-                     {"E", {finiteOrNull(state.alignment->E[0]), finiteOrNull(state.alignment->E[1])}},
-                     {"errors", state.alignment->errors}};
+    const auto checkJson = [](const std::optional<CheckScores>& scores) {
+        return scores ? json{{"theta", scores->theta},
+                             {"E", {finiteOrNull(scores->E[0]), finiteOrNull(scores->E[1])}},
+                             {"errors", scores->errors}}
+                      : json();
+    };
     json cp{{"format", "viscoscope.identify_checkpoint"},
             {"version", kCheckpointVersion},
             {"fingerprint", fingerprint_},
@@ -181,7 +183,8 @@ void Checkpoint::save(const SearchState& state, double elapsed) const {
             {"generations", generations},
             {"elapsed_s", elapsed},
             {"stop", state.stop ? json(toString(*state.stop)) : json()},
-            {"alignment_check", alignment}};
+            {"alignment_check", checkJson(state.alignment)},
+            {"resolution_check", checkJson(state.resolution)}};
     writeJsonAtomically(sealed(cp), file_);
 }
 

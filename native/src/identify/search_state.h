@@ -1,7 +1,7 @@
 // The identification's own state and the pieces of the loop that read it, private to the stage:
 // the evaluations and generations so far (typed here; the checkpoint and result.json hold them as
 // JSON), the checkpoint (search_state.cpp), the time budget (time_budget.cpp), the best
-// evaluation's fields (fields_store.cpp), the alignment check (alignment_check.cpp) and the results
+// evaluation's fields (fields_store.cpp), the grid checks (grid_checks.cpp) and the results
 // (results.cpp). identification.cpp runs the loop over them.
 #pragma once
 
@@ -24,6 +24,11 @@ using Clock = std::chrono::steady_clock;
 
 enum class Fidelity { Coarse, Full };
 const char* fidelityName(Fidelity fidelity);  // "coarse", "full": the records' "fidelity"
+
+// After a one-parameter search: the alignment check (θ* on a grid moved sideways, its particles seeded
+// anew) and the resolution check (θ* on a coarser grid); see grid_checks.cpp.
+enum class GridCheck { Alignment, Resolution };
+bool gridCheckPlanned(const Job& job, GridCheck check);  // one parameter, and the job's setting
 
 // The coarse grid's optimum is not the fine grid's: a grid where the cup's hole is only a few cells
 // wide drains it faster, and its best evaluations sat above the truth. On the job's grid, a third of
@@ -84,10 +89,11 @@ struct GenerationRecord {
 nlohmann::json toJson(const GenerationRecord& record);
 GenerationRecord generationRecordFromJson(const nlohmann::json& doc);
 
-// The two evaluations of a finished alignment check: θ* and kAlignmentStep·θ* on the moved grid.
-struct AlignmentScores {
+// The two points of a finished grid check (grid_checks.cpp): θ* and kCheckStep·θ*, scored on the
+// check's grids.
+struct CheckScores {
     std::array<double, 2> theta{};
-    std::array<double, 2> E{INFINITY, INFINITY};  // ∞ where the simulation failed
+    std::array<double, 2> E{INFINITY, INFINITY};  // ∞ where a simulation failed
     std::vector<std::string> errors;
 };
 
@@ -100,7 +106,7 @@ struct SearchState {
     std::vector<GenerationRecord> generations;
     double elapsedBefore = 0;  // wall seconds of earlier sessions
     std::optional<StopReason> stop;
-    std::optional<AlignmentScores> alignment;
+    std::optional<CheckScores> alignment, resolution;
     int resumedFrom = 0;  // the generations a checkpoint held
 };
 
@@ -140,18 +146,18 @@ double predictedFullEvaluationSeconds(const std::vector<EvaluationRecord>& evalu
 // Wall time against the job's time_budget_s, and what the rest of the search is predicted to take.
 class TimeBudget {
 public:
-    TimeBudget(const Job& job, const SearchState& state, const FidelityPlan& plan, int concurrency,
-               bool alignmentPlanned);
+    TimeBudget(const Job& job, const SearchState& state, const FidelityPlan& plan, int concurrency);
     double elapsed() const;  // over every session
     bool fits(double seconds) const;  // always without a budget
     void addGeneration(Fidelity fidelity, double seconds);
     double coarseGenerationSeconds() const;  // the mean so far
     // The mean so far, else ⌈λ / concurrency⌉ rounds of predictedFullEvaluationSeconds.
     double fineGenerationSeconds() const;
-    // The alignment check's two evaluations, with the margin the minimum generations get.
-    double alignmentSeconds() const;
+    // A grid check's evaluations, with the margin the minimum generations get; 0 when none is planned.
+    double checkSeconds(GridCheck check) const;
+    double gridChecksSeconds() const;  // both
     // The coarse phase must end: another coarse generation would pass its share of the budget or
-    // the time the minimum full-fidelity generations and the alignment check need.
+    // the time the minimum full-fidelity generations and the grid checks need.
     bool coarsePhaseOver() const;
     // The last full-fidelity generation has run: another would end past the budget.
     bool fullPhaseOver() const;
@@ -163,7 +169,6 @@ private:
     const SearchState& state_;
     FidelityPlan plan_;
     int concurrency_;
-    bool alignmentPlanned_;
     Clock::time_point sessionStart_;
     std::vector<double> coarseSeconds_, fineSeconds_;
 };
@@ -191,41 +196,51 @@ private:
     int frames_;
 };
 
-// The alignment check of a one-parameter search (see alignment_check.cpp): θ* scored again on a
-// grid moved sideways, the minimum there, and how far the interval widens.
-struct AlignmentOutcome {
-    nlohmann::json entry;                // the parameter's "alignment_check"
-    std::optional<double> spread;        // |ln(θ_s/θ*)|, infinite when the moved minimum is
-    std::optional<std::string> warning;  // skipped for the budget
+// A grid check of a one-parameter search (see grid_checks.cpp): θ* scored again on other grids, the
+// minimum there, and what it does to the interval.
+struct GridCheckOutcome {
+    nlohmann::json entry;                // the parameter's "alignment_check" or "resolution_check"
+    std::optional<double> minimum;       // θ at the minimum on the check's grids, possibly infinite
+    // How far the interval reaches either side of θ*, in ln θ: alignment |ln(θ_s/θ*)|, infinite when
+    // the moved minimum is; resolution (h/(h_c − h))·|ln(θ_s/θ_c)|.
+    std::optional<double> widening;
+    std::optional<std::string> warning;  // skipped for the budget, or a doubt on θ*
     double seconds = 0;                  // simulated in this session
 };
-// Runs the check's two evaluations unless `state` holds them for θ* (then takes them from there),
+// Each runs its check's evaluations unless `state` holds them for θ* (then takes them from there),
 // storing them in `state` and calling `saved` after. Without a profile, or when they do not fit the
 // budget, it is skipped and says why.
-AlignmentOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
+GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
                                 const TimeBudget& budget, const std::function<void()>& saved);
+GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
+                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
+                                 const GridCheckOutcome& alignment, const TimeBudget& budget,
+                                 const std::function<void()>& saved);
+// The resolution check's grid: cells along the longest axis.
+int resolutionCheckCells(const Job& job);
 
 // One searched parameter at the end of the search: θ*, the final CMA-ES band, in one dimension the
-// profile fit and the alignment check, and the interval reported (results.cpp).
+// profile fit and the grid checks, and the interval reported (results.cpp).
 struct ParameterEstimate {
     double value = 0;  // θ*
     double cmaMean = 0, logStd = 0;
     std::array<double, 2> cma{};               // exp(m ± 2σ√C_ii), within the bounds
     std::optional<nlohmann::json> profileFit;  // fitProfile's account, one-parameter searches only
     std::optional<ProfileFit> profile;         // kept when its vertex lies among the fitted points
-    std::optional<AlignmentOutcome> alignment;
+    std::optional<GridCheckOutcome> alignment, resolution;
     std::array<double, 2> interval{};  // settleInterval's
-    bool widenedByAlignment() const { return alignment && alignment->spread; }
+    bool widenedBy(const std::optional<GridCheckOutcome>& check) const { return check && check->widening; }
 };
-// Parameter i's estimate at θ* = `value` before any alignment check: the CMA band from the final
+// Parameter i's estimate at θ* = `value` before the grid checks: the CMA band from the final
 // distribution and, in one dimension, the profile fit over the full-fidelity evaluations.
 ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
                                     const std::vector<EvaluationRecord>& evaluated, int i, double value);
-// The interval reported: the profile band when there is one, else the CMA band, widened by the
-// alignment check's spread, to contain θ*, and clipped into the bounds.
+// The interval reported: the profile band when there is one, else the CMA band, widened by each grid
+// check's reach, made to contain θ*, and clipped into the bounds.
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);
-// "profile" or "cma", "+alignment" when the check widened it: IdentificationResult::intervalMethod.
+// "profile" or "cma", "+alignment" and "+resolution" for the checks that changed it:
+// IdentificationResult::intervalMethod.
 std::string intervalMethodName(const ParameterEstimate& estimate);
 
 // result.json (but its "fields", which FieldsStore::keep gives): θ* and its intervals, the search's
@@ -241,7 +256,8 @@ std::vector<std::string> doubtsAfterSearch(const Job& job, const LogSearchSpace&
                                            const std::vector<std::array<double, 2>>& intervals,
                                            const std::vector<EvaluationRecord>& evaluated);
 // result.json's "timings": the wall time and each fidelity's evaluations, their seconds and parts.
-nlohmann::json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSeconds, double alignmentSeconds);
+nlohmann::json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSeconds,
+                         double alignmentSeconds, double resolutionSeconds);
 // OUT/evaluations.csv: every evaluation, for plotting.
 void writeEvaluationsCsv(const Job& job, const std::vector<EvaluationRecord>& evaluated,
                          const std::filesystem::path& file);

@@ -67,10 +67,8 @@ double predictedFullEvaluationSeconds(const std::vector<EvaluationRecord>& evalu
     return count ? sum / count : 0.0;
 }
 
-TimeBudget::TimeBudget(const Job& job, const SearchState& state, const FidelityPlan& plan, int concurrency,
-                       bool alignmentPlanned)
-    : job_(job), state_(state), plan_(plan), concurrency_(std::max(1, concurrency)),
-      alignmentPlanned_(alignmentPlanned), sessionStart_(Clock::now()) {
+TimeBudget::TimeBudget(const Job& job, const SearchState& state, const FidelityPlan& plan, int concurrency)
+    : job_(job), state_(state), plan_(plan), concurrency_(std::max(1, concurrency)), sessionStart_(Clock::now()) {
     for (const GenerationRecord& g : state.generations) addGeneration(g.fidelity, g.seconds);
 }
 
@@ -91,35 +89,43 @@ double TimeBudget::fineGenerationSeconds() const {
     return std::ceil(double(state_.es.lambda()) / concurrency_) * predictedFullEvaluationSeconds(state_.evaluated, plan_);
 }
 
-double TimeBudget::alignmentSeconds() const {
-    if (!alignmentPlanned_) return 0.0;
-    return kFineTimeMargin * fineGenerationSeconds() * std::ceil(2.0 / concurrency_) /
-           std::ceil(double(state_.es.lambda()) / concurrency_);
+double TimeBudget::checkSeconds(GridCheck check) const {
+    if (!gridCheckPlanned(job_, check)) return 0.0;
+    const double pair = kFineTimeMargin * fineGenerationSeconds() * std::ceil(2.0 / concurrency_) /
+                        std::ceil(double(state_.es.lambda()) / concurrency_);
+    if (check == GridCheck::Alignment) return pair;
+    // On each placement taken by generation, on a grid whose evaluations cost (r_c/r)⁴ as much.
+    const int grids = placementsByGeneration(job_) ? job_.gridPlacements : 1;
+    return grids * pair * std::pow(double(resolutionCheckCells(job_)) / job_.resolution, 4);
+}
+
+double TimeBudget::gridChecksSeconds() const {
+    return checkSeconds(GridCheck::Alignment) + checkSeconds(GridCheck::Resolution);
 }
 
 bool TimeBudget::coarsePhaseOver() const {
     if (job_.timeBudget <= 0) return false;
     const double reserved = job_.fidelity.minFineGenerations * kFineTimeMargin * fineGenerationSeconds() +
-                            alignmentSeconds();
+                            gridChecksSeconds();
     return elapsed() + coarseGenerationSeconds() >
            std::min(kCoarseBudgetShare * job_.timeBudget, job_.timeBudget - reserved);
 }
 
 bool TimeBudget::fullPhaseOver() const {
     return state_.es.generation() - state_.coarseEnd >= job_.fidelity.minFineGenerations &&
-           !fits(kFineTimeMargin * fineGenerationSeconds() + alignmentSeconds());
+           !fits(kFineTimeMargin * fineGenerationSeconds() + gridChecksSeconds());
 }
 
 double TimeBudget::remaining(int done, bool stopped) const {
-    if (stopped) return alignmentSeconds();
+    if (stopped) return gridChecksSeconds();
     const int coarseLeft = std::max(0, state_.coarseEnd - done);
     const double coarse = coarseLeft * coarseGenerationSeconds();
     double left = coarse + (job_.maxGenerations - std::max(done, state_.coarseEnd)) * fineGenerationSeconds() +
-                  alignmentSeconds();
+                  gridChecksSeconds();
     if (job_.timeBudget > 0) {
         const int fineLeft = std::max(0, job_.fidelity.minFineGenerations - std::max(0, done - state_.coarseEnd));
         left = std::min(left, std::max({0.0, job_.timeBudget - elapsed(),
-                                        coarse + fineLeft * fineGenerationSeconds() + alignmentSeconds()}));
+                                        coarse + fineLeft * fineGenerationSeconds() + gridChecksSeconds()}));
     }
     return left;
 }

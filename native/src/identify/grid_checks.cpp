@@ -1,0 +1,177 @@
+// The grid checks of a one-parameter search. θ* and its profile band come from the search's own
+// draws on the job's grid; two errors of that grid are not in them, so after the search θ* and
+// kCheckStep·θ* are scored again on another grid, and with the profile's curvature c the minimum
+// there is u_m = ((u₁² − u₂²) − (E₁ − E₂)/c) / (2 (u₁ − u₂)). The profile of CMA-ES's spread-out
+// samples is flatter than the landscape (E is more V than parabola near its minimum), so both
+// checks err wide.
+//
+// The alignment check measures scatter. The grid resolves a scene's small features unevenly: where
+// the faces fall against the rim of a hole a few cells wide decides how much of it passes flux, and
+// so the drain; and where the seeded particles fall moves the liquid's surface by a fraction of a
+// cell. Its grid is moved by half a cell along x and y, with the particles seeded anew. One other
+// alignment is a sample of the error, not its sign: the interval is widened to θ*·exp(±|ln(θ_s/θ*)|).
+// The sample cup's figures are in tests/bench/FINDINGS.md, "Figures moved from code comments".
+//
+// The resolution check measures bias: the part of the grid's error neither particle seeds nor
+// placements show, against footage the error of a grid against a continuum. Its grids (the search's
+// placements) have kCoarserCells of the job's cells; its two-point minimum θ_c is compared with the
+// alignment check's θ_s, found by the same two points and curvature on the job's cell, so that what
+// the curvature gets wrong cancels. To first order in the cell size h the minimum then lies
+// h/(h_c − h) times that move from a continuum's; on coarse grids the minimum does not approach a
+// finer grid's monotonically (FINDINGS, "Coverage of identify's interval against finer
+// references"), so like the alignment check's the move is a size, not a sign: the interval holds
+// θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|).
+#include "identify/search_state.h"
+
+namespace viscoscope::identify {
+
+using json = nlohmann::json;
+
+namespace {
+
+constexpr double kCheckStep = 1.15;
+// Cells along x and y; with several grid placements, half their spacing, which puts the alignment
+// check's grids midway between the search's.
+constexpr double kAlignmentShift = 0.5;
+// Added to the particle seed: the alignment check's draw of the seeding is not the search's.
+constexpr unsigned kAlignmentSeedOffset = 1;
+// Coarser by this factor, the resolution check costs about its fourth power of an evaluation (cells
+// × time steps) and still lies where the minimum moves in proportion to the cell size; its move is
+// then carried four times as far to a continuum.
+constexpr double kCoarserCells = 0.8;
+// A grid error beyond this (in ln θ, ln 1.5) is a doubt on θ*: it then outweighs the scatter the
+// interval otherwise holds.
+constexpr double kResolutionDoubt = 0.405;
+
+struct GridCheckSpec {
+    const char* name;
+    int resolution;
+    std::vector<double> gridShifts;  // E is the mean over these grids
+    unsigned seedOffset;
+    std::optional<CheckScores> SearchState::*scores;
+    double seconds;  // predicted
+};
+
+std::optional<double> checkMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
+                                   const std::array<double, 2>& E) {
+    const auto u = [&](double t) { return inverse ? 1 / t : std::log(t); };
+    const double u1 = u(theta[0]), u2 = u(theta[1]);
+    const double um = ((u1 * u1 - u2 * u2) - (E[0] - E[1]) / profile.curvature) / (2 * (u1 - u2));
+    if (!std::isfinite(um)) return std::nullopt;
+    if (inverse) return um > 0 ? std::optional<double>(1 / um) : std::optional<double>(INFINITY);
+    return std::exp(um);
+}
+
+// Scores the check's two evaluations unless `state` holds them for θ* (a rerun of a finished job,
+// or one killed after the check), and finds the minimum on its grid.
+GridCheckOutcome runGridCheck(const GridCheckSpec& spec, const Job& job, EvaluationPool& pool,
+                              const Observations& observations, SearchState& state,
+                              const std::optional<ProfileFit>& profile, double thetaStar, const TimeBudget& budget,
+                              const std::function<void()>& saved) {
+    GridCheckOutcome outcome;
+    json& check = outcome.entry;
+    const std::string name = spec.name;
+    const std::array<double, 2> thetas{thetaStar, kCheckStep * thetaStar};
+    std::optional<CheckScores>& scores = state.*spec.scores;
+    const bool cached = scores && scores->theta == thetas;
+    if (!profile) {
+        check["skipped"] = "no profile fit to take E's curvature from";
+        return outcome;
+    }
+    if (!cached && !budget.fits(spec.seconds)) {
+        outcome.warning = name + ": skipped, its two evaluations (about " + wholeSeconds(spec.seconds) +
+                          " s) do not fit time_budget_s (" + wholeSeconds(job.timeBudget) + " s); the interval "
+                          "leaves out the grid's share of the error";
+        check["skipped"] = *outcome.warning;
+        return outcome;
+    }
+    if (!cached) {
+        const auto start = Clock::now();
+        CheckScores scored{thetas, {0.0, 0.0}, {}};
+        for (double shift : spec.gridShifts) {
+            const BatchResult ran = pool.evaluate(
+                job, observations, {{{thetas[0]}, {thetas[1]}}, false, spec.resolution, shift, {}, spec.seedOffset});
+            for (int k = 0; k < 2; ++k) scored.E[k] += ran.evaluations[k].E / spec.gridShifts.size();
+            for (const std::string& error : ran.errors)
+                if (!error.empty()) scored.errors.push_back(error);
+        }
+        outcome.seconds = std::chrono::duration<double>(Clock::now() - start).count();
+        check["seconds"] = outcome.seconds;
+        scores = scored;
+        saved();
+    }
+    check["from_checkpoint"] = cached;
+    check["theta"] = thetas;
+    check["E"] = {finiteOrNull(scores->E[0]), finiteOrNull(scores->E[1])};
+    const bool bothFinite = std::isfinite(scores->E[0]) && std::isfinite(scores->E[1]);
+    outcome.minimum = bothFinite ? checkMinimum(*profile, job.parameters[0].profileInInverse(), thetas, scores->E)
+                                 : std::nullopt;
+    if (outcome.minimum)
+        check["theta_min"] = std::isfinite(*outcome.minimum) ? json(*outcome.minimum) : json("infinite");
+    else
+        check["failed"] = bothFinite ? json("no finite minimum") : json(scores->errors);
+    return outcome;
+}
+
+}  // namespace
+
+bool gridCheckPlanned(const Job& job, GridCheck check) {
+    // The resolution check's move is measured from the alignment check's minimum.
+    return job.parameters.size() == 1 && job.alignmentCheck && (check == GridCheck::Alignment || job.resolutionCheck);
+}
+
+int resolutionCheckCells(const Job& job) {
+    return std::min(job.resolution - 1, static_cast<int>(std::lround(kCoarserCells * job.resolution)));
+}
+
+GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
+                                SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
+                                const TimeBudget& budget, const std::function<void()>& saved) {
+    const double shift = kAlignmentShift / job.gridPlacements;
+    GridCheckOutcome outcome = runGridCheck({"alignment_check", job.resolution, {shift}, kAlignmentSeedOffset,
+                                             &SearchState::alignment, budget.checkSeconds(GridCheck::Alignment)},
+                                            job, pool, observations, state, profile, thetaStar, budget, saved);
+    outcome.entry["grid_shift_cells"] = {shift, shift, 0.0};
+    outcome.entry["seed_offset"] = kAlignmentSeedOffset;
+    if (outcome.minimum)
+        outcome.widening = std::isfinite(*outcome.minimum) ? std::abs(std::log(*outcome.minimum / thetaStar)) : INFINITY;
+    return outcome;
+}
+
+GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
+                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
+                                 const GridCheckOutcome& alignment, const TimeBudget& budget,
+                                 const std::function<void()>& saved) {
+    const int cells = resolutionCheckCells(job);
+    // On every placement the search took in turn, as θ* is their mean's minimum.
+    std::vector<double> shifts{0.0};
+    for (int k = 1; placementsByGeneration(job) && k < job.gridPlacements; ++k) shifts.push_back(double(k) / job.gridPlacements);
+    if (!alignment.minimum || !std::isfinite(*alignment.minimum)) {
+        GridCheckOutcome outcome;
+        outcome.entry["skipped"] = "the alignment check found no minimum on the job's cell to compare with";
+        return outcome;
+    }
+    GridCheckOutcome outcome = runGridCheck({"resolution_check", cells, shifts, 0, &SearchState::resolution,
+                                             budget.checkSeconds(GridCheck::Resolution)},
+                                            job, pool, observations, state, profile, thetaStar, budget, saved);
+    outcome.entry["resolution"] = cells;
+    if (outcome.entry.contains("skipped")) return outcome;
+    if (!outcome.minimum || !std::isfinite(*outcome.minimum)) {
+        outcome.warning = "resolution_check: no finite minimum on " + std::to_string(cells) +
+                          " cells; the interval leaves out the grid's resolution error";
+        return outcome;
+    }
+    // h/(h_c − h) with h ∝ 1/r.
+    const double reach = double(cells) / (job.resolution - cells);
+    outcome.widening = reach * std::abs(std::log(*alignment.minimum / *outcome.minimum));
+    outcome.entry["error_ln"] = *outcome.widening;
+    if (*outcome.widening > kResolutionDoubt)
+        outcome.warning = "resolution_check: the minimum moves from " + formatNumber(*outcome.minimum) + " on " +
+                          std::to_string(cells) + " cells to " + formatNumber(*alignment.minimum) + " on " +
+                          std::to_string(job.resolution) + ", a grid error of a factor " +
+                          formatNumber(std::exp(*outcome.widening)) + " against a continuum: the grid is too coarse "
+                          "for θ* (a finer grid would tell)";
+    return outcome;
+}
+
+}  // namespace viscoscope::identify
