@@ -75,7 +75,9 @@ GridCheckOutcome runGridCheck(const GridCheckSpec& spec, const Job& job, Evaluat
     std::optional<CheckScores>& scores = state.*spec.scores;
     const bool cached = scores && scores->theta == thetas;
     if (!profile) {
-        check["skipped"] = "no profile fit to take E's curvature from";
+        outcome.warning = name + ": skipped, no profile fit of E near θ* to take its curvature from (too few "
+                          "full-fidelity evaluations near it); the interval leaves out the grid's share of the error";
+        check["skipped"] = *outcome.warning;
         return outcome;
     }
     if (!cached && !budget.fits(spec.seconds)) {

@@ -255,7 +255,12 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             save();
             break;
         }
-        if (budget.fullPhaseOver()) {
+        const auto checksCanRun = [&] {
+            json unused;
+            const std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
+            return n == 1 && best && profileNear(job, state.evaluated, best->theta[0], unused).has_value();
+        };
+        if (budget.fullPhaseOver(checksCanRun())) {
             state.stop = StopReason::TimeBudget;
             save();
             break;

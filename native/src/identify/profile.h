@@ -34,13 +34,9 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
 // None when the lowest point has no neighbour on one side, or E is not finite there.
 std::optional<double> bracketedVertex(const std::vector<std::pair<double, double>>& points, bool inverse);
 
-// The time budget's prediction of a full-fidelity evaluation before any has run: the mean, over
-// the coarse evaluations within kCoarseToFineShift (ln θ, every coordinate) of the best coarse one,
-// where the full-fidelity phase restarts, of their seconds scaled by (r/r_c)⁴ (cells × time steps)
-// and by how much longer the full clip takes: its frames plus the remaining ones at the rate of
-// the coarse clip's last third. `evaluated` holds the checkpoint's evaluation records ("fidelity",
-// "theta", "E", "seconds", "frame_s"). 0 without coarse evaluations.
-
+// E's mean over grid placements as a profile, from evaluations that each ran on one placement (the
+// job's "by_generation" schedule): `points` are (θ, E, grid shift). Each placement's points are
+// joined by straight lines in u (1/θ when `inverse`, else ln θ; repeated θ averaged), and at every
 // point's θ where all placements' lines reach, the profile holds the mean of their E there. The
 // lines, not a fitted curve, because E is often a V near its minimum (FINDINGS, "The profile
 // interval") and a parabola misplaces its tip. Points of a single placement are returned as they

@@ -134,14 +134,20 @@ ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds
                     std::clamp(std::exp(es.mean()[i] + 2 * sd[i]), lower, upper)};
     if (job.parameters.size() == 1) {
         json info;
-        estimate.profile = fitProfile(fullFidelityProfile(job, evaluated), value, 0.5,
-                                      job.parameters[i].profileInInverse(), info);
-        // A vertex beyond the fitted points is an extrapolation, and so is its band
-        // (tests/bench/FINDINGS.md, "The profile interval").
-        if (estimate.profile && !estimate.profile->vertexAmongPoints) estimate.profile.reset();
+        estimate.profile = profileNear(job, evaluated, value, info);
         estimate.profileFit = info;
     }
     return estimate;
+}
+
+std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
+                                      json& info) {
+    std::optional<ProfileFit> profile =
+        fitProfile(fullFidelityProfile(job, evaluated), value, 0.5, job.parameters[0].profileInInverse(), info);
+    // A vertex beyond the fitted points is an extrapolation, and so is its band
+    // (tests/bench/FINDINGS.md, "The profile interval").
+    if (profile && !profile->vertexAmongPoints) profile.reset();
+    return profile;
 }
 
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i) {

@@ -159,8 +159,11 @@ public:
     // The coarse phase must end: another coarse generation would pass its share of the budget or
     // the time the minimum full-fidelity generations and the grid checks need.
     bool coarsePhaseOver() const;
-    // The last full-fidelity generation has run: another would end past the budget.
-    bool fullPhaseOver() const;
+    // The last full-fidelity generation has run: another would end past the budget, with the grid
+    // checks when they could run now (`checksCanRun`: a profile to take E's curvature from). Without
+    // one the budget goes to another generation, which may give the profile, rather than to checks
+    // that would be skipped.
+    bool fullPhaseOver(bool checksCanRun) const;
     // Seconds of the search left after `done` generations (of which coarseEnd coarse).
     double remaining(int done, bool stopped) const;
 
@@ -236,6 +239,10 @@ struct ParameterEstimate {
 // distribution and, in one dimension, the profile fit over the full-fidelity evaluations.
 ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
                                     const std::vector<EvaluationRecord>& evaluated, int i, double value);
+// The profile fit of a one-parameter search's full-fidelity evaluations around θ* = `value`, kept
+// when its vertex lies among the fitted points; `info` receives fitProfile's account.
+std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
+                                      nlohmann::json& info);
 // The interval reported: the profile band when there is one, else the CMA band, widened by each grid
 // check's reach, made to contain θ*, and clipped into the bounds.
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);

@@ -111,9 +111,9 @@ bool TimeBudget::coarsePhaseOver() const {
            std::min(kCoarseBudgetShare * job_.timeBudget, job_.timeBudget - reserved);
 }
 
-bool TimeBudget::fullPhaseOver() const {
+bool TimeBudget::fullPhaseOver(bool checksCanRun) const {
     return state_.es.generation() - state_.coarseEnd >= job_.fidelity.minFineGenerations &&
-           !fits(kFineTimeMargin * fineGenerationSeconds() + gridChecksSeconds());
+           !fits(kFineTimeMargin * fineGenerationSeconds() + (checksCanRun ? gridChecksSeconds() : 0.0));
 }
 
 double TimeBudget::remaining(int done, bool stopped) const {
