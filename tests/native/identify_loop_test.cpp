@@ -335,15 +335,19 @@ TEST_F(IdentifyLoop, RecoversViscosityWithinTenPercent) {
     EXPECT_LE(result.interval[0][0], result.theta[0] * std::exp(-spread) * (1 + 1e-12));
     EXPECT_GE(result.interval[0][1], result.theta[0] * std::exp(spread) * (1 - 1e-12));
     // The resolution check scores the same two points on both placements of a grid of 0.8× the cells,
-    // and the interval holds θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|) of its minimum θ_c.
+    // and the interval holds θ*·exp(±(h/(h_c − h))·(|ln(θ_s/θ_c)| + 1.645 σ)) of its minimum θ_c, σ the
+    // move's noise.
     const json& coarser = result.document.at("viscosity").at("resolution_check");
     std::printf("[ identify ] resolution check: %s\n", coarser.dump().c_str());
     ASSERT_TRUE(coarser.contains("theta_min")) << coarser.dump();
     const int cells = coarser.at("resolution").get<int>();
     EXPECT_EQ(cells, 16);
     EXPECT_EQ(coarser.at("theta"), check.at("theta"));
-    const double gridError = double(cells) / (20 - cells) *
-                             std::abs(std::log(check.at("theta_min").get<double>() / coarser.at("theta_min").get<double>()));
+    const double move = std::abs(std::log(check.at("theta_min").get<double>() / coarser.at("theta_min").get<double>()));
+    EXPECT_NEAR(coarser.at("move_ln").get<double>(), move, 1e-12);
+    const double noise = coarser.at("move_noise_ln").get<double>();
+    EXPECT_GT(noise, 0.0);
+    const double gridError = double(cells) / (20 - cells) * (move + 1.645 * noise);
     EXPECT_NEAR(coarser.at("error_ln").get<double>(), gridError, 1e-12);
     EXPECT_LE(result.interval[0][0], result.theta[0] * std::exp(-gridError) * (1 + 1e-12));
     EXPECT_GE(result.interval[0][1], result.theta[0] * std::exp(gridError) * (1 - 1e-12));

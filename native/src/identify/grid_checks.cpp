@@ -19,8 +19,11 @@
 // the curvature gets wrong cancels. To first order in the cell size h the minimum then lies
 // h/(h_c − h) times that move from a continuum's; on coarse grids the minimum does not approach a
 // finer grid's monotonically (FINDINGS, "Coverage of identify's interval against finer
-// references"), so like the alignment check's the move is a size, not a sign: the interval holds
-// θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|).
+// references"), so like the alignment check's the move is a size, not a sign. Each two-point
+// minimum carries E's jitter j: σ(u_m) = √2·j / (2c|u₁ − u₂|), and the move's σ_m is √2 times that
+// of one (in ln θ); a move within that noise says little, and carried h/(h_c − h) times it would
+// hide a grid error as large as the noise allows (the capture clip's, issue 89). So the interval
+// holds θ*·exp(±(h/(h_c − h))·(|ln(θ_s/θ_c)| + z·σ_m)), z the normal quantile of a 90 % interval.
 #include "identify/search_state.h"
 
 namespace viscoscope::identify {
@@ -39,6 +42,8 @@ constexpr unsigned kAlignmentSeedOffset = 1;
 // × time steps) and still lies where the minimum moves in proportion to the cell size; its move is
 // then carried four times as far to a continuum.
 constexpr double kCoarserCells = 0.8;
+// The two-sided 90 % quantile of the normal distribution.
+constexpr double kNinetyPercentZ = 1.645;
 // A grid error beyond this (in ln θ, ln 1.5) is a doubt on θ*: it then outweighs the scatter the
 // interval otherwise holds.
 constexpr double kResolutionDoubt = 0.405;
@@ -51,6 +56,13 @@ struct GridCheckSpec {
     std::optional<CheckScores> SearchState::*scores;
     double seconds;  // predicted
 };
+
+// σ of ln θ_m for a two-point minimum θ_m (see the resolution check above).
+double minimumNoise(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta, double minimum) {
+    const auto u = [&](double t) { return inverse ? 1 / t : std::log(t); };
+    const double sigmaU = std::sqrt(2.0) * profile.jitter / (2 * profile.curvature * std::abs(u(theta[0]) - u(theta[1])));
+    return inverse ? sigmaU * minimum : sigmaU;  // |d ln θ / du|
+}
 
 std::optional<double> checkMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
                                    const std::array<double, 2>& E) {
@@ -165,7 +177,14 @@ GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Obs
     }
     // h/(h_c − h) with h ∝ 1/r.
     const double reach = double(cells) / (job.resolution - cells);
-    outcome.widening = reach * std::abs(std::log(*alignment.minimum / *outcome.minimum));
+    const bool inverse = job.parameters[0].profileInInverse();
+    const std::array<double, 2> thetas = outcome.entry.at("theta").get<std::array<double, 2>>();
+    const double noise = std::hypot(minimumNoise(*profile, inverse, thetas, *alignment.minimum),
+                                    minimumNoise(*profile, inverse, thetas, *outcome.minimum));
+    const double move = std::abs(std::log(*alignment.minimum / *outcome.minimum));
+    outcome.widening = reach * (move + kNinetyPercentZ * noise);
+    outcome.entry["move_ln"] = move;
+    outcome.entry["move_noise_ln"] = noise;
     outcome.entry["error_ln"] = *outcome.widening;
     if (*outcome.widening > kResolutionDoubt)
         outcome.warning = "resolution_check: the minimum moves from " + formatNumber(*outcome.minimum) + " on " +

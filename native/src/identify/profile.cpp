@@ -53,6 +53,7 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     fit.vertex = theta(uMin);
     fit.vertexAmongPoints = u0 >= lowest && u0 <= highest;
     fit.curvature = coef[2];
+    fit.jitter = jitter;
     const double lo = uMin - half, hi = uMin + half;
     // In 1/θ the band's lower end may pass 0: then it reaches θ = ∞ (clipped to the bounds later).
     fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}

@@ -25,6 +25,7 @@ struct ProfileFit {
     std::array<double, 2> interval{};  // θ
     bool vertexAmongPoints = false;    // within the span of the fitted points (no extrapolation)
     double curvature = 0;              // c of E ≈ a + b u + c u²
+    double jitter = 0;                 // E's scatter about the parabola
 };
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
                                      double range, bool inverse, nlohmann::json& info);

@@ -198,8 +198,8 @@ json parameterEntry(const Job& job, const LogSearchSpace& bounds, const Paramete
         method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
                   "and y by half a cell, or half the spacing of the grid placements (alignment_check)";
     if (estimate.widenedBy(estimate.resolution))
-        method += "; resolution: widened to θ*·exp(±(h/(h_c − h))·|ln(θ_s/θ_c)|), θ_c the minimum on the grids of "
-                  "cell h_c > h by the same two points (resolution_check)";
+        method += "; resolution: widened to θ*·exp(±(h/(h_c − h))·(|ln(θ_s/θ_c)| + 1.645 σ)), θ_c the minimum on the "
+                  "grids of cell h_c > h by the same two points, σ the move's noise from E's jitter (resolution_check)";
     entry["interval_method"] = method;
     return entry;
 }
