@@ -135,7 +135,8 @@ bool gridCheckPlanned(const Job& job, GridCheck check) {
 }
 
 int resolutionCheckCells(const Job& job) {
-    return std::min(job.resolution - 1, static_cast<int>(std::lround(kCoarserCells * job.resolution)));
+    return std::max(kMinResolution,
+                    std::min(job.resolution - 1, static_cast<int>(std::lround(kCoarserCells * job.resolution))));
 }
 
 GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
@@ -163,6 +164,13 @@ GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Obs
     if (!alignment.minimum || !std::isfinite(*alignment.minimum)) {
         GridCheckOutcome outcome;
         outcome.entry["skipped"] = "the alignment check found no minimum on the job's cell to compare with";
+        return outcome;
+    }
+    if (cells >= job.resolution) {
+        GridCheckOutcome outcome;
+        outcome.warning = "resolution_check: skipped, a grid of " + std::to_string(job.resolution) +
+                          " cells has no coarser one; the interval leaves out the grid's resolution error";
+        outcome.entry["skipped"] = *outcome.warning;
         return outcome;
     }
     GridCheckOutcome outcome = runGridCheck({"resolution_check", cells, shifts, 0, &SearchState::resolution,
