@@ -20,10 +20,11 @@
 // h/(h_c − h) times that move from a continuum's; on coarse grids the minimum does not approach a
 // finer grid's monotonically (FINDINGS, "Coverage of identify's interval against finer
 // references"), so like the alignment check's the move is a size, not a sign. Each two-point
-// minimum carries E's jitter j: σ(u_m) = √2·j / (2c|u₁ − u₂|), and the move's σ_m is √2 times that
-// of one (in ln θ); a move within that noise says little, and carried h/(h_c − h) times it would
-// hide a grid error as large as the noise allows (the capture clip's, issue 89). So the interval
-// holds θ*·exp(±(h/(h_c − h))·(|ln(θ_s/θ_c)| + z·σ_m)), z the normal quantile of a 90 % interval.
+// minimum carries E's jitter j: σ(u_m) = √2·j / (2c|u₁ − u₂|), and the move's σ_m (in ln θ) combines
+// both minima's; a move within that noise says little, and a grid error as large as the noise
+// allows would pass unseen (the capture clip's did: same FINDINGS section). So the interval holds
+// θ*·exp(±(h/(h_c − h))·(|ln(θ_s/θ_c)| + z·σ_m)), z that of a two-sided 90 % normal interval: Roache's
+// grid convergence index carries the same move by the same factor, with a safety factor on top.
 #include "identify/search_state.h"
 
 namespace viscoscope::identify {
@@ -39,10 +40,9 @@ constexpr double kAlignmentShift = 0.5;
 // Added to the particle seed: the alignment check's draw of the seeding is not the search's.
 constexpr unsigned kAlignmentSeedOffset = 1;
 // Coarser by this factor, the resolution check costs about its fourth power of an evaluation (cells
-// × time steps) and still lies where the minimum moves in proportion to the cell size; its move is
-// then carried four times as far to a continuum.
+// × time steps) and stays near enough the job's grid for a first-order estimate; its move is then
+// carried four times as far to a continuum.
 constexpr double kCoarserCells = 0.8;
-// The two-sided 90 % quantile of the normal distribution.
 constexpr double kNinetyPercentZ = 1.645;
 // A grid error beyond this (in ln θ, ln 1.5) is a doubt on θ*: it then outweighs the scatter the
 // interval otherwise holds.
@@ -93,7 +93,7 @@ GridCheckOutcome runGridCheck(const GridCheckSpec& spec, const Job& job, Evaluat
         return outcome;
     }
     if (!cached && !budget.fits(spec.seconds)) {
-        outcome.warning = name + ": skipped, its two evaluations (about " + wholeSeconds(spec.seconds) +
+        outcome.warning = name + ": skipped, its evaluations (about " + wholeSeconds(spec.seconds) +
                           " s) do not fit time_budget_s (" + wholeSeconds(job.timeBudget) + " s); the interval "
                           "leaves out the grid's share of the error";
         check["skipped"] = *outcome.warning;

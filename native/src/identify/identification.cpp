@@ -248,6 +248,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         return Eigen::VectorXd::Constant(1, std::log(*vertex));
     };
 
+    // The grid checks need a profile of E near the best full-fidelity evaluation (grid_checks.cpp).
+    auto checksCanRun = [&] {
+        json unused;
+        const std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
+        return n == 1 && best && profileNear(job, state.evaluated, best->theta[0], unused).has_value();
+    };
+
     while (!state.stop) {
         const int g = es.generation();
         if (g >= job.maxGenerations) {
@@ -255,11 +262,6 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             save();
             break;
         }
-        const auto checksCanRun = [&] {
-            json unused;
-            const std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
-            return n == 1 && best && profileNear(job, state.evaluated, best->theta[0], unused).has_value();
-        };
         if (budget.fullPhaseOver(checksCanRun())) {
             state.stop = StopReason::TimeBudget;
             save();

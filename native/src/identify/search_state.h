@@ -205,7 +205,7 @@ struct GridCheckOutcome {
     nlohmann::json entry;                // the parameter's "alignment_check" or "resolution_check"
     std::optional<double> minimum;       // θ at the minimum on the check's grids, possibly infinite
     // How far the interval reaches either side of θ*, in ln θ: alignment |ln(θ_s/θ*)|, infinite when
-    // the moved minimum is; resolution (h/(h_c − h))·|ln(θ_s/θ_c)|.
+    // the moved minimum is; resolution (h/(h_c − h))·(|ln(θ_s/θ_c)| + z·σ), σ that move's noise.
     std::optional<double> widening;
     std::optional<std::string> warning;  // skipped for the budget, or a doubt on θ*
     double seconds = 0;                  // simulated in this session
