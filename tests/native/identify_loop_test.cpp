@@ -20,6 +20,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -711,7 +712,9 @@ TEST_F(IdentifyLoop, WarnsWhenTheReferenceNeverShowsTheLiquid) {
     const json& doubts = result.document.at("doubts");
     ASSERT_EQ(doubts.size(), warnings.size() - 1);
     ASSERT_GE(doubts.size(), 1u);
-    EXPECT_NE(doubts[0].get<std::string>().find("E is nearly flat"), std::string::npos) << doubts[0];
+    EXPECT_TRUE(std::any_of(doubts.begin(), doubts.end(), [](const json& d) {
+        return d.get<std::string>().find("E is nearly flat") != std::string::npos;
+    })) << doubts.dump();
     for (const json& d : doubts) EXPECT_NE(std::find(warnings.begin(), warnings.end(), d.get<std::string>()), warnings.end());
     EXPECT_EQ(result.document.at("reference_informative_frames"), 0);
     fs::remove_all(out);
