@@ -19,6 +19,7 @@ Phases:
 import argparse
 import json
 import math
+import os
 import pathlib
 import random
 import signal
@@ -127,8 +128,10 @@ def trial(engine, phase, rng):
     command, ready, span = PHASES[phase]
     with tempfile.TemporaryDirectory(prefix="viscoscope_cancel_") as tmp:
         work = pathlib.Path(tmp)
+        # Each trial's own calibration cache, so that the hole calibration's solves run every time.
+        env = dict(os.environ, VISCOSCOPE_CACHE_DIR=str(work / "cache"))
         process = subprocess.Popen([str(engine)] + command(work) + ["--progress", "json"], stdout=subprocess.PIPE,
-                                   stderr=subprocess.DEVNULL, text=True)
+                                   stderr=subprocess.DEVNULL, text=True, env=env)
         start = time.monotonic()
         if ready is not None:
             for line in process.stdout:

@@ -12,7 +12,8 @@ the cup s cells along x and y and u cells above a row of z-faces; the flux depen
 percent, so each lattice prints the placements' mean, and the means are fitted linearly in Δx,
 the error of a hole cut from whole faces being first order.
 
-Each run calibrates the hole in full (2–4 steady solves): at 48 and 64 all eight runs took 2 min,
+Each run calibrates the hole in full (2–4 steady solves; run with VISCOSCOPE_CACHE_DIR= to keep
+the engine from taking a calibration it stored before): at 48 and 64 all eight runs took 2 min,
 one run at 96 about 3 min, both while the machine ran other work.
 
     /usr/bin/python3 tests/bench/hole_calibration.py --resolutions 48,64

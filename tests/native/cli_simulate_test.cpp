@@ -8,6 +8,7 @@
 
 #include <csignal>
 #include <cstdint>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -45,6 +46,9 @@ protected:
                                             ::testing::UnitTest::GetInstance()->current_test_info()->name());
         fs::remove_all(dir_);
         fs::create_directories(dir_);
+        // Each test's own calibration cache: a hole calibration found by an earlier test or run
+        // would skip the solves a test (a cancel inside them) is about.
+        ::setenv("VISCOSCOPE_CACHE_DIR", (dir_ / "cache").c_str(), 1);
     }
     void TearDown() override { fs::remove_all(dir_); }
     fs::path write(const json& scene) const {
@@ -255,6 +259,43 @@ TEST_F(SimulateCommand, SigtermInsideAFrameStopsWithoutFinishingIt) {
     EXPECT_FALSE(fs::exists(dir_ / "out/particles_00001.bin"));
     EXPECT_FALSE(fs::exists(dir_ / "out/simulation.json"));
     EXPECT_FALSE(fs::exists(dir_ / "out/resume.state"));
+}
+
+// The hole's calibration is kept for the next run of the same grid, which takes it without a
+// solve and makes every frame byte for byte as the first run did; a damaged cache file is passed
+// over (the run calibrates again), and an empty VISCOSCOPE_CACHE_DIR keeps nothing.
+TEST_F(SimulateCommand, TheHoleCalibrationIsKeptForTheNextRunOfTheSameGrid) {
+    const std::string scene = write(smallScene()).string();
+    const auto run = [&](const std::string& out) {
+        const CommandResult r = simulate(scene + " --out " + (dir_ / out).string(), dir_);
+        EXPECT_EQ(r.exitCode, 0) << r.err;
+        json summary;
+        std::ifstream(dir_ / out / "simulation.json") >> summary;
+        return summary.at("hole_calibrations").at(0);
+    };
+    const json first = run("first");
+    EXPECT_GT(first.at("solves").get<int>(), 0);
+    ASSERT_TRUE(fs::exists(dir_ / "cache/calibrations"));
+    const json second = run("second");
+    EXPECT_EQ(second.at("solves"), 0);
+    for (const char* figure : {"resistance", "grid_flux_vs_dagan", "calibrated_flux_vs_dagan"})
+        EXPECT_EQ(second.at(figure), first.at(figure)) << figure;
+    for (int f = 0; f <= 2; ++f) {
+        char name[32];
+        std::snprintf(name, sizeof name, "particles_%05d.bin", f);
+        EXPECT_EQ(viscoscope::fileDigest(dir_ / "second" / name), viscoscope::fileDigest(dir_ / "first" / name)) << name;
+    }
+
+    for (const fs::directory_entry& entry : fs::directory_iterator(dir_ / "cache/calibrations"))
+        std::ofstream(entry.path()) << "{\"engine_build\": \"damaged\"";
+    const json afterDamage = run("after_damage");
+    EXPECT_GT(afterDamage.at("solves").get<int>(), 0);
+    EXPECT_EQ(afterDamage.at("resistance"), first.at("resistance"));
+
+    ::setenv("VISCOSCOPE_CACHE_DIR", "", 1);
+    fs::remove_all(dir_ / "cache");
+    EXPECT_GT(run("uncached").at("solves").get<int>(), 0);
+    EXPECT_FALSE(fs::exists(dir_ / "cache"));
 }
 
 // The hole calibration (a minute of steady solves at 64³, before frame 0) stops on a cancel too.

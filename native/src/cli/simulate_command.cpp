@@ -35,12 +35,6 @@ std::string frameName(const char* prefix, int frame, const char* ext) {
 
 namespace {
 
-// The running engine's build: a run resumed or kept must be one this code would make.
-const std::string& engineBuild() {
-    static const std::string build = fileDigest("/proc/self/exe");
-    return build;
-}
-
 struct SimulateOptions {
     std::string scene;
     std::string out;

@@ -57,24 +57,21 @@ struct GridCheckSpec {
     double seconds;  // predicted
 };
 
-// The profile's variable (see fitProfile).
-double profileU(bool inverse, double theta) { return inverse ? 1 / theta : std::log(theta); }
-
 // σ of ln θ_m for a two-point minimum θ_m (see the resolution check above).
 double minimumNoise(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta, double minimum) {
-    const auto u = [&](double t) { return profileU(inverse, t); };
+    const auto u = [&](double t) { return profileVariable(inverse, t); };
     const double sigmaU = std::sqrt(2.0) * profile.jitter / (2 * profile.curvature * std::abs(u(theta[0]) - u(theta[1])));
     return inverse ? sigmaU * minimum : sigmaU;  // |d ln θ / du|
 }
 
 std::optional<double> checkMinimum(const ProfileFit& profile, bool inverse, const std::array<double, 2>& theta,
                                    const std::array<double, 2>& E) {
-    const auto u = [&](double t) { return profileU(inverse, t); };
+    const auto u = [&](double t) { return profileVariable(inverse, t); };
     const double u1 = u(theta[0]), u2 = u(theta[1]);
     const double um = ((u1 * u1 - u2 * u2) - (E[0] - E[1]) / profile.curvature) / (2 * (u1 - u2));
     if (!std::isfinite(um)) return std::nullopt;
-    if (inverse) return um > 0 ? std::optional<double>(1 / um) : std::optional<double>(INFINITY);
-    return std::exp(um);
+    if (inverse && um <= 0) return INFINITY;  // beyond 1/θ = 0
+    return profileParameter(inverse, um);
 }
 
 // Scores the check's two evaluations unless `state` holds them for θ* (a rerun of a finished job,

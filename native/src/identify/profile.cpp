@@ -12,10 +12,13 @@ namespace viscoscope::identify {
 
 using json = nlohmann::json;
 
+double profileVariable(bool inverse, double theta) { return inverse ? 1 / theta : std::log(theta); }
+double profileParameter(bool inverse, double u) { return inverse ? 1 / u : std::exp(u); }
+
 std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>>& points, double thetaBest,
                                      double range, bool inverse, json& info) {
-    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
-    const auto theta = [&](double value) { return inverse ? 1 / value : std::exp(value); };
+    const auto u = [&](double theta) { return profileVariable(inverse, theta); };
+    const auto theta = [&](double value) { return profileParameter(inverse, value); };
     std::vector<std::pair<double, double>> near;
     for (const auto& p : points)
         if (std::abs(std::log(p.first / thetaBest)) <= range && std::isfinite(p.second))
@@ -74,7 +77,7 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
         if (p.first > best->first && (!above || p.first < above->first)) above = &p;
     }
     if (!below || !above) return std::nullopt;
-    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    const auto u = [&](double theta) { return profileVariable(inverse, theta); };
     // Relative to the lowest point, a = (u, E) below and c above in θ; both E ≥ its E, so the
     // parabola is convex (or flat: then the midpoint) and its vertex lies between them.
     const double ua = u(below->first) - u(best->first), uc = u(above->first) - u(best->first);
@@ -82,11 +85,11 @@ std::optional<double> bracketedVertex(const std::vector<std::pair<double, double
     const double denominator = ua * ec - uc * ea;
     const double u0 = denominator == 0 ? (ua + uc) / 2 : (ua * ua * ec - uc * uc * ea) / (2 * denominator);
     const double vertex = u(best->first) + u0;
-    return inverse ? 1 / vertex : std::exp(vertex);
+    return profileParameter(inverse, vertex);
 }
 
 std::vector<std::pair<double, double>> placementMeanProfile(const std::vector<PlacedPoint>& points, bool inverse) {
-    const auto u = [&](double theta) { return inverse ? 1 / theta : std::log(theta); };
+    const auto u = [&](double theta) { return profileVariable(inverse, theta); };
     struct Node {
         double theta = 0, sumE = 0;
         int count = 0;

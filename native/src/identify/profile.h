@@ -11,6 +11,11 @@
 
 namespace viscoscope::identify {
 
+// The profile's variable u for a value θ of the parameter, and back: u = 1/θ when `inverse`, else
+// ln θ (see fitProfile for why).
+double profileVariable(bool inverse, double theta);
+double profileParameter(bool inverse, double u);
+
 // The profile of E around the best full-fidelity evaluation θ_b of a single parameter: a
 // least-squares parabola E ≈ a + b u + c u² over the points (θ, E) with |ln θ − ln θ_b| ≤ `range`
 // (`inverse`: u = 1/θ, else ln θ), at least five of them; `info` receives the fit's figures.

@@ -30,6 +30,11 @@ std::string fileDigest(const std::filesystem::path& file) {
     return digest.hex();
 }
 
+const std::string& engineBuild() {
+    static const std::string build = fileDigest("/proc/self/exe");
+    return build;
+}
+
 namespace {
 constexpr const char* kSealKey = "content_digest";
 }  // namespace

@@ -24,6 +24,10 @@ private:
 // The digest of a file's bytes. Throws std::runtime_error when it cannot be read.
 std::string fileDigest(const std::filesystem::path& file);
 
+// The digest of the running engine's executable: a run resumed or kept, or a calibration read back,
+// must be one this code would make.
+const std::string& engineBuild();
+
 // A machine file that carries the digest of the rest of itself (its "content_digest"), so that its
 // reader tells a damaged or hand-edited copy from what was written and refuses it whole, instead of
 // failing on whichever value it reads first. `doc` must be an object.

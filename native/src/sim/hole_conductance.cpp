@@ -1,8 +1,9 @@
 // The subgrid conductance of a cup's hole (see HoleCalibration in sim.h).
 #include "sim/sim.h"
 
+#include "sim/calibration_cache.h"
+
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <iomanip>
 #include <map>
@@ -91,15 +92,32 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
     // as it does in the simulation.
     const Vec3 cells = ((cup.position - grid.origin) / dx).array().floor();
     const Vec3 hole = (cup.position - grid.origin) / dx - cells;
-    const std::array<double, 7> key{dx, r, t, hole.x(), hole.y(), hole.z(), double(solver.particlesPerCell)};
+    // Everything the box's solves below read: the scene's solver settings that they keep, and the
+    // hole's size and place among the faces.
+    const nlohmann::json key = {{"calibration", "hole"},
+                                {"cell", dx},
+                                {"hole_radius", r},
+                                {"bottom_thickness", t},
+                                {"hole_in_cell", {hole.x(), hole.y(), hole.z()}},
+                                {"max_iterations", solver.maxIterations},
+                                {"cfl", solver.cfl},
+                                {"particles_per_cell", solver.particlesPerCell},
+                                {"picard_iterations", solver.picardIterations}};
     static std::mutex mutex;
-    static std::map<std::array<double, 7>, HoleCalibration> cache;
+    static std::map<std::string, HoleCalibration> cache;  // this process's, by key
     {
         const std::lock_guard<std::mutex> lock(mutex);
-        if (auto found = cache.find(key); found != cache.end()) {
-            HoleCalibration cached = found->second;
-            cached.solves = 0;
-            return cached;
+        if (auto found = cache.find(key.dump()); found != cache.end()) return found->second;
+        if (const std::optional<nlohmann::json> stored = cachedCalibration(key)) {
+            try {
+                HoleCalibration cached;
+                cached.resistance = stored->at("resistance").get<double>();
+                cached.gridFlux = stored->at("grid_flux").get<double>();
+                cached.calibratedFlux = stored->at("calibrated_flux").get<double>();
+                cache.emplace(key.dump(), cached);
+                return cached;
+            } catch (const nlohmann::json::exception&) {  // not one this code wrote: calibrated again
+            }
         }
     }
 
@@ -185,8 +203,13 @@ HoleCalibration Simulation::calibrateHole(const CupSolid& cup, const Grid& grid,
         calibration.resistance = resistance;
         calibration.calibratedFlux = flux;
     }
+    cacheCalibration(key, {{"resistance", calibration.resistance},
+                           {"grid_flux", calibration.gridFlux},
+                           {"calibrated_flux", calibration.calibratedFlux}});
     const std::lock_guard<std::mutex> lock(mutex);
-    cache.emplace(key, calibration);
+    HoleCalibration reused = calibration;
+    reused.solves = 0;
+    cache.emplace(key.dump(), reused);
     return calibration;
 }
 
