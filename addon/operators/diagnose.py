@@ -83,6 +83,9 @@ def read_diagnosis(context, out_dir):
     lines += ["Warning: %s" % w for w in doc.get("warnings", ())]
     lines += [describe_noise_floor(doc["noise_floor"]), describe_errors(doc["errors"])]
     lines += [describe_model(m) for m in models]
+    lines += ["Run %d alone: %s" % (entry["run"], describe_model(entry)) for entry in doc.get("base_per_run", ())]
+    if doc.get("runs_disagree"):
+        lines.append("The runs disagree: " + doc["runs_disagree"])
     refit = doc.get("base_refit")
     if refit:
         lines.append("The base refit from where %s's fit puts it %s; the other base fit: %s"

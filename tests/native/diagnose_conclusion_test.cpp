@@ -144,6 +144,39 @@ TEST_F(Conclusion, NamesNoEffectThatEndedAsTheBase) {
     EXPECT_FALSE(c.candidates[0].earns);
 }
 
+// The base fitted to each run alone: viscosities whose intervals share no value are a base model
+// that cannot hold both runs, so the data showed an effect even where no candidate predicted it.
+TEST_F(Conclusion, RunsThatDisagreeRuleOutNoMissingEffect) {
+    const auto runFit = [](double eta, double low, double high) {
+        diagnose::ModelFit fit = fitOf("base", 0.05, -30);
+        fit.parameters = {"viscosity"};
+        fit.theta = {eta};
+        fit.interval = {{low, high}};
+        return fit;
+    };
+    const std::vector<diagnose::ModelFit> apart{runFit(1.56, 1.48, 1.61), runFit(2.26, 2.14, 2.58)};
+    const std::vector<diagnose::ModelFit> overlapping{runFit(1.56, 1.48, 1.80), runFit(1.70, 1.62, 1.95)};
+    EXPECT_FALSE(diagnose::runsDisagree(overlapping).has_value());
+    EXPECT_FALSE(diagnose::runsDisagree({apart[0]}).has_value());
+    const std::optional<std::string> disagreement = diagnose::runsDisagree(apart);
+    ASSERT_TRUE(disagreement.has_value());
+    EXPECT_NE(disagreement->find("run 1 1.56 [1.48, 1.61], run 2 2.26 [2.14, 2.58]"), std::string::npos) << *disagreement;
+
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const std::vector<diagnose::ModelFit> noGain{fitOf("shear_thinning", 0.095, -49)};
+    EXPECT_EQ(conclude(base, noGain, scatteredBy(1.01), {}, {}).verdict, Verdict::NoMissingEffect);
+    std::vector<diagnose::Judged> judged{{&noGain[0], &effects_[0], false}};
+    const auto c = diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart);
+    EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
+    EXPECT_NE(c.sentence.find("disagree on the base's viscosity"), std::string::npos) << c.sentence;
+    EXPECT_TRUE(mentions(c.whatWouldTell, "candidates fitted longer")) << c.sentence;
+    // A candidate that earns its parameters is still named.
+    const std::vector<diagnose::ModelFit> gain{fitOf("shear_thinning", 0.03, -70)};
+    judged = {{&gain[0], &effects_[0], false}};
+    EXPECT_EQ(diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart).verdict,
+              Verdict::MissingEffect);
+}
+
 TEST_F(Conclusion, ADeterministicModelNeedsOnlyTheGain) {
     const diagnose::ModelFit base = fitOf("base", 0.10, -50);
     const diagnose::NoiseFloor exact{{0.10}, true, 0};

@@ -23,13 +23,13 @@ using json = nlohmann::json;
 // A current fed at 3 cm³/s through an 8 mm disc in a domain 0.4 m across, at `resolution` cells (the
 // identification's 400: 1 mm, where the front at 200 sat 1–5 % out and η*, which the radius holds
 // only to the power 1/8, 16 % off in a Newtonian control); the source stops at `sourceEnd` s.
-json filmScene(int resolution, const json& material, double sourceEnd) {
+json filmScene(int resolution, const json& material, double sourceEnd, double flux = 3e-6) {
     return {{"format", "viscoscope.scene"},
             {"version", 1},
             {"domain", {{"min", {-0.2, -0.2, -0.01}}, {"max", {0.2, 0.2, 0.05}}, {"resolution", resolution}}},
             {"solids", {{{"type", "ground"}, {"height", 0.0}}}},
             {"liquids", {{{"type", "emitter"}, {"center", {0, 0, 0}}, {"normal", {0, 0, 1}}, {"radius", 0.008},
-                          {"flux", 3e-6}, {"end", sourceEnd}}}},
+                          {"flux", flux}, {"end", sourceEnd}}}},
             {"material", material},
             {"fps", 0.25},
             {"frames", 61}};
@@ -37,16 +37,16 @@ json filmScene(int resolution, const json& material, double sourceEnd) {
 
 // DIR/radius.csv, the record: every 4 s for 240 s from a film of `material` on 0.4 mm cells, in
 // 0.5 mm steps; and DIR/scene.json, the identification's Newtonian scene on 1 mm cells. The source
-// runs throughout unless `sourceEnd` says when it stops.
-void writeRecordAndScene(const fs::path& dir, const json& material, double sourceEnd = 1e30) {
-    film::AxisymmetricFilm reference(parseScene(filmScene(1000, material, sourceEnd), "reference"));
+// runs throughout unless `sourceEnd` says when it stops; it feeds `flux` m³/s.
+void writeRecordAndScene(const fs::path& dir, const json& material, double sourceEnd = 1e30, double flux = 3e-6) {
+    film::AxisymmetricFilm reference(parseScene(filmScene(1000, material, sourceEnd, flux), "reference"));
     std::ofstream csv(dir / "radius.csv");
     csv << "time_s,radius_m\n";
     for (int f = 1; f <= 60; ++f) {
         reference.advanceTo(4.0 * f);
         csv << 4.0 * f << "," << 5e-4 * std::round(reference.frontRadius() / 5e-4) << "\n";
     }
-    std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}, sourceEnd).dump();
+    std::ofstream(dir / "scene.json") << filmScene(400, {{"density", 1000}, {"viscosity", 20.0}}, sourceEnd, flux).dump();
 }
 
 // The job of DIR/scene.json against DIR/radius.csv, with the film: η searched from 20 Pa·s.
@@ -141,6 +141,55 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
             const double knownE = known->at("E").get<double>();
             EXPECT_LE(d.candidates[c].fittedE, knownE * (1 + 1e-9)) << hidden.expected << ": " << d.candidates[c].model;
             if (d.candidates[c].model == "shear_thinning") EXPECT_NEAR(knownE / firstBaseE, 1.0, 1e-9) << hidden.expected;
+        }
+    }
+    fs::remove_all(root);
+}
+
+// Two runs of one liquid fed at 3 and 0.3 cm³/s, in one job: the base fitted to each alone reads a
+// shear-thinning liquid's viscosity lower in the faster run, in intervals that share no value, and a
+// Newtonian liquid's alike in both.
+TEST(FilmDiagnosis, EachRunAloneDisagreesOnAShearThinningLiquidsViscosityOnly) {
+    const std::vector<HiddenEffect> cases{
+        {"", {{"density", 1000}, {"viscosity", 50.0}}, {}},
+        {"shear_thinning",
+         {{"density", 1000}, {"viscosity", 20.0}, {"model", {{"type", "power_law"}, {"consistency", 20.0}, {"flow_index", 0.4}}}},
+         {}},
+    };
+    const fs::path root = fs::temp_directory_path() / ("viscoscope_film_runs_" + std::to_string(::getpid()));
+    for (const HiddenEffect& hidden : cases) {
+        const fs::path dir = root / (*hidden.expected ? hidden.expected : "newtonian");
+        json job = radiusJob();
+        job.erase("scene");
+        job["runs"] = json::array();
+        for (const double flux : {3e-6, 3e-7}) {
+            const std::string run = flux > 2e-6 ? "fast" : "slow";
+            fs::create_directories(dir / run);
+            writeRecordAndScene(dir / run, hidden.material, 1e30, flux);
+            json track = job.at("track");
+            track["csv"] = run + "/radius.csv";
+            job["runs"].push_back({{"scene", run + "/scene.json"}, {"track", track}});
+        }
+        job.erase("track");
+        std::ofstream(dir / "job.json") << job.dump();
+        const diagnose::Diagnosis d = diagnose::diagnose(identify::loadJob(dir / "job.json"), dir / "out");
+        ASSERT_EQ(d.runFits.size(), 2u);
+        const json& perRun = d.document.at("base_per_run");
+        ASSERT_EQ(perRun.size(), 2u);
+        const double fast = d.runFits[0].theta[0], slow = d.runFits[1].theta[0];
+        std::printf("hidden %s: η alone %.4g [%.4g, %.4g] at 3 cm³/s, %.4g [%.4g, %.4g] at 0.3 cm³/s; %s\n",
+                    *hidden.expected ? hidden.expected : "nothing", fast, d.runFits[0].interval[0][0],
+                    d.runFits[0].interval[0][1], slow, d.runFits[1].interval[0][0], d.runFits[1].interval[0][1],
+                    d.document.at("conclusion").get<std::string>().c_str());
+        EXPECT_EQ(perRun[0].at("run"), 1);
+        EXPECT_EQ(perRun[1].at("parameters").at("viscosity").at("value"), slow);
+        if (*hidden.expected) {
+            EXPECT_LT(fast, slow);
+            EXPECT_TRUE(d.document.at("runs_disagree").is_string()) << d.document.at("runs_disagree");
+            EXPECT_EQ(d.chosen ? d.candidates[*d.chosen].model : "", hidden.expected) << d.document.at("conclusion");
+        } else {
+            EXPECT_TRUE(d.document.at("runs_disagree").is_null()) << d.document.at("runs_disagree");
+            EXPECT_EQ(d.verdict, diagnose::Verdict::NoMissingEffect) << d.document.at("conclusion");
         }
     }
     fs::remove_all(root);

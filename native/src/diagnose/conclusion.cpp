@@ -4,6 +4,7 @@
 #include <boost/math/distributions/students_t.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 
@@ -85,6 +86,25 @@ double NoiseFloor::visibleShare() const {
     return -std::expm1(-boost::math::quantile(t, kGainConfidence) * std::sqrt(2.0) * logSpread());
 }
 
+std::optional<std::string> runsDisagree(const std::vector<ModelFit>& runFits) {
+    if (runFits.size() < 2) return std::nullopt;
+    for (size_t i = 0; i < runFits.front().parameters.size(); ++i) {
+        double highestLow = -INFINITY, lowestHigh = INFINITY;
+        std::string values;
+        for (size_t r = 0; r < runFits.size(); ++r) {
+            const std::array<double, 2>& interval = runFits[r].interval.at(i);
+            highestLow = std::max(highestLow, interval[0]);
+            lowestHigh = std::min(lowestHigh, interval[1]);
+            values += (r ? ", run " : "run ") + std::to_string(r + 1) + " " + formatNumber(runFits[r].theta.at(i)) +
+                      " [" + formatNumber(interval[0]) + ", " + formatNumber(interval[1]) + "]";
+        }
+        if (highestLow > lowestHigh)
+            return "the runs fitted alone disagree on the base's " + runFits.front().parameters[i] + " (" + values +
+                   "), which one base model cannot hold";
+    }
+    return std::nullopt;
+}
+
 const char* toString(Verdict verdict) {
     switch (verdict) {
         case Verdict::MissingEffect: return "missing_effect";
@@ -95,7 +115,7 @@ const char* toString(Verdict verdict) {
 }
 
 Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, const std::vector<Judged>& candidates,
-                    const NoiseFloor& noise, const Unfitted& unfitted) {
+                    const NoiseFloor& noise, const Unfitted& unfitted, const std::vector<ModelFit>& runFits) {
     Conclusion conclusion;
     const double visible = noise.visibleShare();
     std::optional<size_t> best;
@@ -152,6 +172,12 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
                                                 : scatter + ", more than the " + percent(kHeldOutGain) + " an effect must show");
         if (noise.heldOutE.size() >= 2) lessScatter(job, conclusion);
         else addOnce(conclusion.whatWouldTell, {"the noise floor measured (--scatter-replicas 2 or more, and the time for them)"});
+    }
+    if (const std::optional<std::string> disagreement = runsDisagree(runFits)) {
+        why.push_back(*disagreement + ": it lacks an effect that no fitted candidate predicted " + percent(kHeldOutGain) +
+                      " better");
+        addOnce(conclusion.whatWouldTell, {"the candidates fitted longer, or other candidates (--effects)"});
+        moreTime(timeBudget, conclusion);
     }
     if (!base.searchCompleted()) cutShort.insert(cutShort.begin(), "base");
     if (!cutShort.empty() && !best) {

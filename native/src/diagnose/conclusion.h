@@ -51,10 +51,18 @@ struct Conclusion {
     std::vector<CandidateVerdict> candidates;
 };
 
+// Where the base fitted to each run alone puts a parameter in intervals that share no value, as a
+// sentence naming each run's value and interval: one base model cannot hold every run (a
+// shear-thinning liquid reads a lower viscosity in the geometry that shears it faster). None with
+// fewer than two runs fitted or intervals that overlap.
+std::optional<std::string> runsDisagree(const std::vector<ModelFit>& runFits);
+
 // `base` and `candidates` fitted and scored alike, `noise` measured at the base's θ*, `unfitted`
-// the candidates the budget could not hold; `job` for what would tell (its grid, placements and
-// runs) and `timeBudget` the diagnosis's (0: none of its own).
+// the candidates the budget could not hold, `runFits` the base fitted to each run alone (none with
+// a single run); `job` for what would tell (its grid, placements and runs) and `timeBudget` the
+// diagnosis's (0: none of its own). Runs that disagree (runsDisagree) rule out "no missing effect".
 Conclusion conclude(const identify::Job& job, double timeBudget, const ModelFit& base,
-                    const std::vector<Judged>& candidates, const NoiseFloor& noise, const Unfitted& unfitted = {});
+                    const std::vector<Judged>& candidates, const NoiseFloor& noise, const Unfitted& unfitted = {},
+                    const std::vector<ModelFit>& runFits = {});
 
 }  // namespace viscoscope::diagnose

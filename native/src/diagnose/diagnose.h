@@ -3,7 +3,8 @@
 // effect the scene can hold (effect.h, effects()) are fitted to the first part of the reference
 // (each its own identification) and scored on all of it. The base's θ* is scored again on other
 // particle seeds and grid placements, which measures how much the forward model alone moves the
-// held-out E (the noise floor). The conclusion is one of three: a missing effect, named when its fit
+// held-out E (the noise floor); with several runs, the base is also fitted to each run alone. The
+// conclusion is one of three: a missing effect, named when its fit
 // predicts the held-out rest better than the base by a clear margin, by more than the noise floor
 // explains, and pays for its parameters in the fitted part (BIC); no missing effect, where such a
 // gain would have shown and none did; or cannot tell, with what would tell.
@@ -93,6 +94,10 @@ const char* toString(Verdict verdict);  // "missing_effect", "no_missing_effect"
 struct Diagnosis {
     ModelFit base;
     std::vector<ModelFit> candidates;
+    // With several runs, the base fitted to each run alone (its first part), in the job's order of
+    // runs: the values a run's geometry alone gives, which one base model cannot hold when they
+    // disagree.
+    std::vector<ModelFit> runFits;
     NoiseFloor noise;
     Verdict verdict = Verdict::CannotTell;
     std::optional<size_t> chosen;  // into candidates, with Verdict::MissingEffect

@@ -177,7 +177,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         else if (!options.effects.empty()) throw InputError(job.file.string() + ": diagnose: " + effect.name + ": " + why);
         else refused.emplace_back(effect.name, why);
     }
-    const int fits = 1 + static_cast<int>(candidates.size());
+    // With several runs, the base fitted to each alone too (nothing to fit when every unknown is fixed).
+    const int runFits = job.otherRuns.empty() || job.parameters.empty() ? 0 : 1 + static_cast<int>(job.otherRuns.size());
+    const int fits = 1 + static_cast<int>(candidates.size()) + runFits;
     // The steps the progress counts: the fits and the noise floor after the base's.
     const bool measuresScatter = options.scatterReplicas > 0;
     int steps = fits + (measuresScatter ? 1 : 0);
@@ -200,6 +202,33 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         warn("diagnose: the base fit was cut short (" + std::string(toString(*diagnosis.base.stop)) + ") after " +
              std::to_string(diagnosis.base.evaluations) + " evaluations: no effect will be named unless its refit "
              "completes (a larger --time-budget, or 0 to give each fit the job's own)");
+    FitCost cost = FitCost::of(diagnosis.base);
+    // Each run alone, restarted at the base fit: about one base fit's least in all, each run holding
+    // its share of the frames.
+    json runsDoc = json::array();
+    if (runFits > 0 && !budget.holds(cost.leastFit(job, int(job.parameters.size())))) {
+        warn("diagnose: the time budget cannot hold the base's fits to each run alone: the runs are not compared");
+        budget.forgo(runFits);
+        steps -= runFits;
+    } else if (runFits > 0) {
+        json parameters = json::array();
+        for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], diagnosis.base.theta[i]));
+        const std::vector<Job> runs = runsOf(job);
+        for (size_t r = 0; r < runs.size(); ++r) {
+            const std::string folder = "base_run" + std::to_string(r + 1);
+            if (options.onFit) options.onFit(folder, step++, steps, parameterNames(job));
+            IdentifyOptions identifyOptions = options.identify;
+            identifyOptions.knownPoint = diagnosis.base.theta;
+            json series;
+            diagnosis.runFits.push_back(fitModel("base", runs[r], modelJob(runs[r], nullptr, parameters, {fitCounts[r]}),
+                                                 {observations[r]}, {fitCounts[r]}, outDir / "fits" / folder,
+                                                 identifyOptions, budget.nextSearch(), series));
+            budget.spend(diagnosis.runFits.back());
+            json entry = toJson(diagnosis.runFits.back(), series, folder);
+            entry["run"] = r + 1;
+            runsDoc.push_back(entry);
+        }
+    }
     const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
     std::vector<Candidate> fitted(candidates.size());  // each candidate as it is fitted
     for (size_t c = 0; c < candidates.size(); ++c) candidateFor(*candidates[c], baseFit, fitted[c]);
@@ -209,7 +238,6 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     // it), and before the first the noise floor's scorings too (each as long as the base's). Those
     // it cannot hold are not fitted: the conclusion cannot then be "no missing effect", and it says
     // what budget would hold them.
-    FitCost cost = FitCost::of(diagnosis.base);
     const int replicas = std::max(0, options.scatterReplicas);
     const double noiseSeconds = replicas * diagnosis.base.scoringSeconds;
     Unfitted beyondBudget;
@@ -231,6 +259,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
              "--time-budget of about " + std::to_string(std::lround(beyondBudget.budgetNeeded)) +
              " s or more, or fewer --effects)");
         steps -= int(least.size());
+        budget.forgo(int(least.size()));
         candidates.resize(first);
         fitted.resize(first);
         return false;
@@ -334,7 +363,8 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                  "--effects to share them)");
         judged.push_back({&fit, candidates[c], vanishes});
     }
-    const Conclusion conclusion = conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget);
+    const Conclusion conclusion =
+        conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget, diagnosis.runFits);
     diagnosis.verdict = conclusion.verdict;
     diagnosis.chosen = conclusion.chosen;
     for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
@@ -401,6 +431,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         {"not_tried", notTried},
         {"errors", errors}};
     if (!baseRefit.is_null()) diagnosis.document["base_refit"] = baseRefit;
+    if (!runsDoc.empty()) {
+        diagnosis.document["base_per_run"] = runsDoc;
+        const std::optional<std::string> disagreement = runsDisagree(diagnosis.runFits);
+        diagnosis.document["runs_disagree"] = disagreement ? json(*disagreement) : json();
+    }
     writeJsonAtomically(diagnosis.document, outDir / "diagnosis.json");
     return diagnosis;
 }

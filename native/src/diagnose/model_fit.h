@@ -42,6 +42,7 @@ class FitBudget {
     bool holds(double seconds) const;
     void spend(const ModelFit& fit);
     void spend(const NoiseFloor& noise);
+    void forgo(int fits) { fitsLeft_ -= fits; }  // fits that will not run share no more of it
     double spent() const { return spent_; }
 
   private:
