@@ -241,14 +241,24 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     const int replicas = std::max(0, options.scatterReplicas);
     const double noiseSeconds = replicas * diagnosis.base.scoringSeconds;
     Unfitted beyondBudget;
+    double droppedLeast = 0;  // the least fits of the candidates left unfitted so far
+    // Keeps the candidates from `first` on, in their order, that the budget holds after `besides`
+    // seconds more; whether it holds the one at `first`.
     const auto budgetHoldsFrom = [&](size_t first, double besides) {
         std::vector<double> least;
         for (size_t c = first; c < fitted.size(); ++c) least.push_back(cost.leastFit(job, int(fitted[c].parameters.size())));
-        const double needed = std::accumulate(least.begin(), least.end(), besides);
-        if (budget.holds(needed)) return true;
-        beyondBudget = {int(least.size()), budget.spent() + needed};
+        size_t kept = 0;
+        double needed = besides;
+        while (kept < least.size() && budget.holds(needed + least[kept])) needed += least[kept++];
+        if (kept == least.size()) return true;
+        const size_t dropped = least.size() - kept;
+        // What a budget holding them all needs: what is spent, the fits left, and those dropped before.
+        const double allLeft = std::accumulate(least.begin(), least.end(), besides);
+        beyondBudget.budgetNeeded = budget.spent() + allLeft + droppedLeast;
+        beyondBudget.candidates += int(dropped);
+        droppedLeast += allLeft - needed;
         std::string names;
-        for (size_t c = first; c < candidates.size(); ++c) {
+        for (size_t c = first + kept; c < candidates.size(); ++c) {
             names += (names.empty() ? "" : ", ") + candidates[c]->name;
             refused.emplace_back(candidates[c]->name, "the time budget: its fit takes about " +
                                                           std::to_string(std::lround(least[c - first])) +
@@ -258,11 +268,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         warn("diagnose: the time budget cannot hold the least fits of " + names + ": they are not fitted (a "
              "--time-budget of about " + std::to_string(std::lround(beyondBudget.budgetNeeded)) +
              " s or more, or fewer --effects)");
-        steps -= int(least.size());
-        budget.forgo(int(least.size()));
-        candidates.resize(first);
-        fitted.resize(first);
-        return false;
+        steps -= int(dropped);
+        budget.forgo(int(dropped));
+        candidates.resize(first + kept);
+        fitted.resize(first + kept);
+        return kept > 0;
     };
     budgetHoldsFrom(0, noiseSeconds);
     if (measuresScatter && options.onFit) options.onFit("noise_floor", step++, steps, {});
