@@ -173,8 +173,9 @@ TEST_F(Conclusion, RunsThatDisagreeRuleOutNoMissingEffect) {
     // A candidate that earns its parameters is still named.
     const std::vector<diagnose::ModelFit> gain{fitOf("shear_thinning", 0.03, -70)};
     judged = {{&gain[0], &effects_[0], false}};
-    EXPECT_EQ(diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart).verdict,
-              Verdict::MissingEffect);
+    const auto named = diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart);
+    EXPECT_EQ(named.verdict, Verdict::MissingEffect);
+    EXPECT_EQ(named.runsDisagreement, disagreement);
 }
 
 TEST_F(Conclusion, ADeterministicModelNeedsOnlyTheGain) {

@@ -117,6 +117,7 @@ const char* toString(Verdict verdict) {
 Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, const std::vector<Judged>& candidates,
                     const NoiseFloor& noise, const Unfitted& unfitted, const std::vector<ModelFit>& runFits) {
     Conclusion conclusion;
+    conclusion.runsDisagreement = runsDisagree(runFits);
     const double visible = noise.visibleShare();
     std::optional<size_t> best;
     std::vector<std::string> withinScatter, cutShort;
@@ -173,7 +174,7 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
         if (noise.heldOutE.size() >= 2) lessScatter(job, conclusion);
         else addOnce(conclusion.whatWouldTell, {"the noise floor measured (--scatter-replicas 2 or more, and the time for them)"});
     }
-    if (const std::optional<std::string> disagreement = runsDisagree(runFits)) {
+    if (const std::optional<std::string>& disagreement = conclusion.runsDisagreement) {
         why.push_back(*disagreement + ": it lacks an effect that no fitted candidate predicted " + percent(kHeldOutGain) +
                       " better");
         addOnce(conclusion.whatWouldTell, {"the candidates fitted longer, or other candidates (--effects)"});

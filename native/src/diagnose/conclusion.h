@@ -49,6 +49,7 @@ struct Conclusion {
     // ("resolution", "grid_placements", "time_budget_s").
     nlohmann::json suggestedSettings = nlohmann::json::object();
     std::vector<CandidateVerdict> candidates;
+    std::optional<std::string> runsDisagreement;  // runsDisagree's sentence for the runs fitted alone
 };
 
 // Where the base fitted to each run alone puts a parameter in intervals that share no value, as a

@@ -443,8 +443,8 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     if (!baseRefit.is_null()) diagnosis.document["base_refit"] = baseRefit;
     if (!runsDoc.empty()) {
         diagnosis.document["base_per_run"] = runsDoc;
-        const std::optional<std::string> disagreement = runsDisagree(diagnosis.runFits);
-        diagnosis.document["runs_disagree"] = disagreement ? json(*disagreement) : json();
+        diagnosis.document["runs_disagree"] =
+            conclusion.runsDisagreement ? json(*conclusion.runsDisagreement) : json();
     }
     writeJsonAtomically(diagnosis.document, outDir / "diagnosis.json");
     return diagnosis;
