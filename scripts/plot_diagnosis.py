@@ -3,9 +3,11 @@
 
 Top, per run: the residual over time of the base fit and of the chosen effect (the measured track
 against each simulation, or each frame's silhouette E), the fitted frames left of the dashed line
-and the predicted ones right of it. Then every model's E over the fitted and the held-out frames.
-Bottom: the landscape of the chosen effect's new parameters (the base's, when none is chosen): E
-over the fitted frames at every evaluation of its fit (OUT/fits/<model>/evaluations.csv), θ* marked.
+and the predicted ones right of it. Then every model's E over the fitted and the held-out frames,
+and beside it the answer's flow curve τ(γ̇) over the shear rates its flow exercised, with its band
+and the job's rheometer curve when it names one. Bottom: the landscape of the chosen effect's new
+parameters (the base's, when none is chosen): E over the fitted frames at every evaluation of its
+fit (OUT/fits/<model>/evaluations.csv), θ* marked.
 
 Usage: /usr/bin/python3 scripts/plot_diagnosis.py OUT
 Needs matplotlib (Debian: python3-matplotlib). `viscoscope diagnose` calls this script itself.
@@ -44,6 +46,27 @@ def landscape(ax, evaluations, name, best):
     ax.legend()
 
 
+def flow_curve(ax, curve):
+    """The answer's stress against shear rate, log-log, its band shaded, the rheometer's points."""
+    points = curve["points"]
+    rates = [p["shear_rate_per_s"] for p in points]
+    ax.plot(rates, [p["stress_pa"] for p in points], "-", color="C0", label=curve["model"])
+    if all("stress_band_pa" in p for p in points):
+        ax.fill_between(rates, [p["stress_band_pa"][0] for p in points], [p["stress_band_pa"][1] for p in points],
+                        color="C0", alpha=0.25, label="band of the intervals")
+    rheometer = curve.get("rheometer")
+    if rheometer:
+        rms = rheometer.get("log_stress_rms")
+        label = "rheometer" + (" (log RMS %.2f)" % rms if rms is not None else "")
+        ax.plot([p[0] for p in rheometer["points"]], [p[1] for p in rheometer["points"]], "k.", label=label)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("shear rate (1/s)")
+    ax.set_ylabel("stress (Pa)")
+    ax.set_title("flow curve over the exercised shear rates", fontsize=10)
+    ax.legend(fontsize=8)
+
+
 def main(out_dir):
     with open(os.path.join(out_dir, "diagnosis.json"), encoding="utf-8") as fh:
         diagnosis = json.load(fh)
@@ -59,7 +82,8 @@ def main(out_dir):
     if new and os.path.isfile(path):
         with open(path, encoding="utf-8", newline="") as fh:
             evaluations = list(csv.DictReader(fh))
-    columns = max(1, len(new))
+    curve = diagnosis.get("flow_curve")
+    columns = max(2 if curve else 1, len(new))
     fig = plt.figure(figsize=(7, 3 * (runs + 1 + bool(evaluations))))
     grid = fig.add_gridspec(runs + 1 + bool(evaluations), columns)
     for r in range(runs):
@@ -74,7 +98,7 @@ def main(out_dir):
         ax.set_xlabel("time (s)")
         ax.set_title(f"run {r + 1}: {verdict}")
         ax.legend()
-    ax = fig.add_subplot(grid[runs, :])
+    ax = fig.add_subplot(grid[runs, :columns - 1] if curve else grid[runs, :])
     models = [base] + diagnosis["candidates"]
     x = range(len(models))
     ax.bar([i - 0.2 for i in x], [m["fitted_E"] for m in models], width=0.4, label="fitted frames")
@@ -88,6 +112,8 @@ def main(out_dir):
     ax.set_yscale("log")
     ax.set_ylabel("E")
     ax.legend()
+    if curve:
+        flow_curve(fig.add_subplot(grid[runs, columns - 1]), curve)
     for k, name in enumerate(new if evaluations else []):
         ax = fig.add_subplot(grid[runs + 1, k])
         landscape(ax, evaluations, name, shown["parameters"][name]["value"])

@@ -67,6 +67,26 @@ def describe_noise_floor(noise):
             "gains under %.0f %% are within it" % (math.exp(noise["log_spread"]), scorings, 100 * noise["visible_share"]))
 
 
+def describe_cross_run(candidate):
+    """A candidate fitted to each run alone, in one line: how well it predicts the other runs."""
+    cross = candidate["cross_run"]
+    gain = cross.get("gain")
+    said = "not compared" if gain is None else "%.0f %% %s than the base's" % (100 * abs(gain), "better" if gain >= 0 else "worse")
+    return "%s fitted to each run alone predicts the other runs %s (E %.4g)" % (candidate["model"], said, cross["E"])
+
+
+def describe_flow_curve(curve):
+    """The answer's flow curve in one line: its shear rates and how far it lies from the rheometer's."""
+    low, high = curve["shear_rate_range_per_s"]
+    line = "Flow curve of %s over %.3g–%.3g 1/s, the shear rates its flow exercised" % (curve["model"], low, high)
+    rms = (curve.get("rheometer") or {}).get("log_stress_rms")
+    if rms is not None:
+        line += "; %.2f off the rheometer's (log10 of stress, RMS)" % rms
+    elif curve.get("rheometer"):
+        line += "; the rheometer's curve does not reach these shear rates"
+    return line
+
+
 def read_diagnosis(context, out_dir):
     """DIR/diagnosis.json into the Diagnose panel; diagnosis.png as its preview."""
     path = os.path.join(out_dir, "diagnosis.json")
@@ -86,6 +106,9 @@ def read_diagnosis(context, out_dir):
     lines += ["Run %d alone: %s" % (entry["run"], describe_model(entry)) for entry in doc.get("base_per_run", ())]
     if doc.get("runs_disagree"):
         lines.append("The runs disagree: " + doc["runs_disagree"])
+    lines += [describe_cross_run(c) for c in doc["candidates"] if c.get("cross_run")]
+    if doc.get("flow_curve"):
+        lines.append(describe_flow_curve(doc["flow_curve"]))
     refit = doc.get("base_refit")
     if refit:
         lines.append("The base refit from where %s's fit puts it %s; the other base fit: %s"

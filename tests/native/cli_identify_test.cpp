@@ -297,6 +297,20 @@ TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
     expectRefused("--time-budget=-60", jobFile, "the time budget must be a finite number of seconds ≥ 0");
     // Two masks (frames 2 and 4): nothing left to predict after the three a fit needs at least.
     expectRefused("", writeJob(job(), "short.json"), "compared frames, too few to fit 3 and predict at least 2 more");
+    // A rheometer curve that is missing, lacks its stress column or holds a stress of zero.
+    const auto withRheometer = [&](const std::string& csv, const std::string& text) {
+        if (!text.empty()) std::ofstream(dir_ / csv) << text;
+        json rheometer = doc;
+        rheometer["rheometer"] = csv;
+        return writeJob(rheometer, "rheometer.json");
+    };
+    expectRefused("", withRheometer("absent.csv", ""), "absent.csv: rheometer: not found");
+    expectRefused("", withRheometer("torque.csv", "shear_rate_per_s,torque_nm\n1,2\n10,3\n"),
+                  "torque.csv: rheometer: no column \"stress_pa\"");
+    expectRefused("", withRheometer("zero.csv", "shear_rate_per_s,stress_pa\n1,2\n10,0\n"),
+                  "zero.csv:3: rheometer: shear rate and stress must be positive numbers, got 10, 0");
+    expectRefused("", withRheometer("backwards.csv", "shear_rate_per_s,stress_pa\n10,2\n1,3\n"),
+                  "backwards.csv:3: shear_rate_per_s goes backwards");
 }
 
 // A thin-film job whose scene or track the film cannot hold is refused before any work, in one line

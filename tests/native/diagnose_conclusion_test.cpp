@@ -49,7 +49,7 @@ protected:
                                   const diagnose::Unfitted& unfitted = {}) {
         std::vector<diagnose::Judged> judged;
         for (size_t i = 0; i < fits.size(); ++i)
-            judged.push_back({&fits[i], &effects_[i % effects_.size()], i < vanishes.size() && vanishes[i]});
+            judged.push_back({&fits[i], &effects_[i % effects_.size()], i < vanishes.size() && vanishes[i], std::nullopt});
         return diagnose::conclude(job_, timeBudget_, base, judged, noise, unfitted);
     }
     identify::Job job_;
@@ -165,17 +165,57 @@ TEST_F(Conclusion, RunsThatDisagreeRuleOutNoMissingEffect) {
     const diagnose::ModelFit base = fitOf("base", 0.10, -50);
     const std::vector<diagnose::ModelFit> noGain{fitOf("shear_thinning", 0.095, -49)};
     EXPECT_EQ(conclude(base, noGain, scatteredBy(1.01), {}, {}).verdict, Verdict::NoMissingEffect);
-    std::vector<diagnose::Judged> judged{{&noGain[0], &effects_[0], false}};
+    std::vector<diagnose::Judged> judged{{&noGain[0], &effects_[0], false, std::nullopt}};
     const auto c = diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart);
     EXPECT_EQ(c.verdict, Verdict::CannotTell) << c.sentence;
     EXPECT_NE(c.sentence.find("disagree on the base's viscosity"), std::string::npos) << c.sentence;
     EXPECT_TRUE(mentions(c.whatWouldTell, "candidates fitted longer")) << c.sentence;
     // A candidate that earns its parameters is still named.
     const std::vector<diagnose::ModelFit> gain{fitOf("shear_thinning", 0.03, -70)};
-    judged = {{&gain[0], &effects_[0], false}};
+    judged = {{&gain[0], &effects_[0], false, std::nullopt}};
     const auto named = diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, apart);
     EXPECT_EQ(named.verdict, Verdict::MissingEffect);
     EXPECT_EQ(named.runsDisagreement, disagreement);
+}
+
+// Of two laws that both earn their parameters, the one with fewer is named unless the other predicts
+// the held-out frames better by the margin the base had to be beaten by.
+TEST_F(Conclusion, NamesTheRicherLawOnlyWhereItPredictsClearlyBetter) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto law = [](const std::string& model, double heldOutE, size_t parameters) {
+        diagnose::ModelFit fit = fitOf(model, heldOutE, -70);
+        fit.theta.assign(parameters, 1.0);
+        return fit;
+    };
+    effects_ = {effectOf("herschel_bulkley", "shear thinning with a yield stress"), effectOf("shear_thinning", "shear thinning")};
+    const auto near = conclude(base, {law("herschel_bulkley", 0.028, 3), law("shear_thinning", 0.030, 2)}, scatteredBy(1.01));
+    ASSERT_EQ(near.verdict, Verdict::MissingEffect) << near.sentence;
+    EXPECT_EQ(near.chosen, 1u) << near.sentence;
+    const auto clearly = conclude(base, {law("herschel_bulkley", 0.020, 3), law("shear_thinning", 0.030, 2)}, scatteredBy(1.01));
+    EXPECT_EQ(clearly.chosen, 0u) << clearly.sentence;
+}
+
+// With several runs and what the base fitted to each alone predicts of the others, an effect is
+// named only where its own fits to each run alone predict the others clearly better: in place of
+// BIC, which here it fails.
+TEST_F(Conclusion, AnEffectMustCarryAcrossTheRuns) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const std::vector<diagnose::ModelFit> fits{fitOf("shear_thinning", 0.05, -45)};
+    const auto judge = [&](std::optional<double> crossRunE) {
+        std::vector<diagnose::Judged> judged{{&fits[0], &effects_[0], false, crossRunE}};
+        return diagnose::conclude(job_, timeBudget_, base, judged, scatteredBy(1.01), {}, {}, 0.40);
+    };
+    EXPECT_EQ(conclude(base, fits, scatteredBy(1.01)).verdict, Verdict::NoMissingEffect);  // by BIC, one run
+    const auto carries = judge(0.10);
+    EXPECT_EQ(carries.verdict, Verdict::MissingEffect) << carries.sentence;
+    EXPECT_NEAR(*carries.candidates[0].crossRunGain, 0.75, 1e-12);
+    EXPECT_NE(carries.sentence.find("the other runs 75 % better"), std::string::npos) << carries.sentence;
+    const auto staysBehind = judge(0.38);
+    EXPECT_EQ(staysBehind.verdict, Verdict::CannotTell) << staysBehind.sentence;
+    EXPECT_NE(staysBehind.sentence.find("carry across geometries"), std::string::npos) << staysBehind.sentence;
+    const auto untested = judge(std::nullopt);
+    EXPECT_EQ(untested.verdict, Verdict::CannotTell) << untested.sentence;
+    EXPECT_NE(untested.sentence.find("not fitted to each run alone"), std::string::npos) << untested.sentence;
 }
 
 TEST_F(Conclusion, ADeterministicModelNeedsOnlyTheGain) {

@@ -148,7 +148,8 @@ TEST(FilmDiagnosis, NamesEachHiddenEffectAndNoneInANewtonianControl) {
 
 // Two runs of one liquid fed at 3 and 0.3 cm³/s, in one job: the base fitted to each alone reads a
 // shear-thinning liquid's viscosity lower in the faster run, in intervals that share no value, and a
-// Newtonian liquid's alike in both.
+// Newtonian liquid's alike in both. The power law found, fitted to each run alone, predicts the other
+// run better than the base fitted to it alone: the law carries across the runs.
 TEST(FilmDiagnosis, EachRunAloneDisagreesOnAShearThinningLiquidsViscosityOnly) {
     const std::vector<HiddenEffect> cases{
         {"", {{"density", 1000}, {"viscosity", 50.0}}, {}},
@@ -187,6 +188,13 @@ TEST(FilmDiagnosis, EachRunAloneDisagreesOnAShearThinningLiquidsViscosityOnly) {
             EXPECT_LT(fast, slow);
             EXPECT_TRUE(d.document.at("runs_disagree").is_string()) << d.document.at("runs_disagree");
             EXPECT_EQ(d.chosen ? d.candidates[*d.chosen].model : "", hidden.expected) << d.document.at("conclusion");
+            const json& tested = d.document.at("cross_run").at("tested");
+            ASSERT_EQ(tested, hidden.expected) << d.document.at("cross_run");
+            for (const json& candidate : d.document.at("candidates"))
+                if (candidate.at("model") == tested) {
+                    std::printf("  across the runs: %s\n", candidate.at("cross_run").dump().substr(0, 200).c_str());
+                    EXPECT_GT(candidate.at("cross_run").at("gain").get<double>(), 0.2);
+                }
         } else {
             EXPECT_TRUE(d.document.at("runs_disagree").is_null()) << d.document.at("runs_disagree");
             EXPECT_EQ(d.verdict, diagnose::Verdict::NoMissingEffect) << d.document.at("conclusion");
@@ -222,7 +230,7 @@ TEST(FilmDiagnosis, RefusesTheCandidatesABudgetCannotHoldAndSharesOneThatCan) {
     EXPECT_TRUE(mentions(refused.at("what_would_tell"), "fewer --effects")) << refused.at("what_would_tell");
     int forTheBudget = 0;
     for (const json& n : refused.at("not_tried")) forTheBudget += n.at("why").get<std::string>().rfind("the time budget", 0) == 0;
-    EXPECT_EQ(forTheBudget, 3) << refused.at("not_tried");  // all but side_walls, which the scene cannot hold
+    EXPECT_EQ(forTheBudget, 4) << refused.at("not_tried");  // all but side_walls, which the scene cannot hold
     const double suggested = refused.at("suggested_settings").at("time_budget_s").get<double>();
     EXPECT_GT(suggested, refused.at("seconds").get<double>());
     EXPECT_EQ(refused.at("grid").at("resolution"), identify::loadJob(dir / "job.json").resolution);
@@ -231,7 +239,7 @@ TEST(FilmDiagnosis, RefusesTheCandidatesABudgetCannotHoldAndSharesOneThatCan) {
     options.timeBudget = 4 * suggested;
     const diagnose::Diagnosis d = diagnose::diagnose(identify::loadJob(dir / "job.json"), dir / "out_held", options);
     const json& doc = d.document;
-    ASSERT_EQ(d.candidates.size(), 3u) << doc.at("warnings");
+    ASSERT_EQ(d.candidates.size(), 4u) << doc.at("warnings");
     const auto [first, refit] = firstBaseAndRefit(doc);
     std::vector<json> fits{first};
     for (const json& candidate : doc.at("candidates")) fits.push_back(candidate);

@@ -2,6 +2,7 @@
 // reference run at another resolution and seed than the fits use.
 #include "collapsing_column.h"
 #include "diagnose/diagnose.h"
+#include "diagnose/flow_curve.h"
 
 #include <gtest/gtest.h>
 #include <openvdb/openvdb.h>
@@ -9,7 +10,10 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <functional>
 #include <map>
 
 namespace {
@@ -54,6 +58,11 @@ TEST_F(DiagnoseFronts, FindsAHiddenYieldStressOrPowerLawAndNoEffectInANewtonianC
                         {"model", {{"type", "power_law"}, {"consistency", 20.0}, {"flow_index", 0.4}}}};
     const json newtonian{{"density", 1400}, {"viscosity", 10.0}, {"surface_tension", 0.0}};
     const std::map<std::string, std::string> hiddenEffect{{"bingham", "yield_stress"}, {"power_law", "shear_thinning"}};
+    // Each liquid's flow curve as a rheometer would give it, the job's "rheometer".
+    const std::map<std::string, std::function<double(double)>> hiddenStress{
+        {"bingham", [](double rate) { return 60 + 10 * rate; }},
+        {"power_law", [](double rate) { return 20 * std::pow(rate, 0.4); }},
+        {"newtonian", [](double rate) { return 10 * rate; }}};
     for (const auto& [label, material] : {std::pair<const char*, json>{"bingham", bingham}, {"power_law", powerLaw},
                                           {"newtonian", newtonian}}) {
         json reference = sceneJson(10.0, 24, 11, kDiagnosisFrames);
@@ -67,6 +76,12 @@ TEST_F(DiagnoseFronts, FindsAHiddenYieldStressOrPowerLawAndNoEffectInANewtonianC
         doc["track"] = {{"csv", csv}, {"column", "front_m"}, {"observable", "front"},
                         {"origin", {gate.x(), gate.y(), gate.z()}}, {"direction", {1, 0, 0}}};
         doc["max_generations"] = 12;
+        const std::string rheometer = std::string(label) + "_rheometer.csv";
+        std::ofstream flowCurve(dir_ / rheometer);
+        flowCurve << "shear_rate_per_s,stress_pa\n";
+        for (int k = 0; k <= 12; ++k) flowCurve << std::pow(10.0, -1 + k / 4.0) << "," << hiddenStress.at(label)(std::pow(10.0, -1 + k / 4.0)) << "\n";
+        flowCurve.close();
+        doc["rheometer"] = rheometer;
         diagnose::DiagnoseOptions options;
         options.effects = {"shear_thinning", "yield_stress"};
         const auto started = std::chrono::steady_clock::now();
@@ -101,6 +116,13 @@ TEST_F(DiagnoseFronts, FindsAHiddenYieldStressOrPowerLawAndNoEffectInANewtonianC
             std::printf("; held-out E %.4g, BIC %.1f (base %.1f), %ld evaluations\n", fit.heldOutE, fit.bic,
                         diagnosis.base.bic, fit.evaluations);
         }
+        // The answer's flow curve over the shear rates its flow exercised, against the hidden law's.
+        const json& curve = d.at("flow_curve");
+        const double rms = curve.at("rheometer").at("log_stress_rms").get<double>();
+        std::printf("[ diagnose ]   flow curve of %s over %s 1/s: log10 stress RMS %.3f against the hidden law\n",
+                    curve.at("model").get<std::string>().c_str(), curve.at("shear_rate_range_per_s").dump().c_str(), rms);
+        EXPECT_LT(curve.at("shear_rate_range_per_s")[0].get<double>(), curve.at("shear_rate_range_per_s")[1].get<double>());
+        if (diagnosis.verdict != diagnose::Verdict::CannotTell) EXPECT_LT(rms, diagnose::kRheometerLogStressWarning) << label;
         if (const auto hidden = hiddenEffect.find(label); hidden != hiddenEffect.end()) {
             ASSERT_TRUE(diagnosis.chosen.has_value()) << label;
             EXPECT_EQ(diagnosis.candidates[*diagnosis.chosen].model, hidden->second);

@@ -86,6 +86,20 @@ double NoiseFloor::visibleShare() const {
     return -std::expm1(-boost::math::quantile(t, kGainConfidence) * std::sqrt(2.0) * logSpread());
 }
 
+std::optional<size_t> preferredFit(const std::vector<const ModelFit*>& fits, const std::vector<bool>& eligible) {
+    std::vector<size_t> order;
+    for (size_t c = 0; c < fits.size(); ++c)
+        if (eligible[c]) order.push_back(c);
+    std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+        const ModelFit &fa = *fits[a], &fb = *fits[b];
+        return fa.theta.size() != fb.theta.size() ? fa.theta.size() < fb.theta.size() : fa.heldOutE < fb.heldOutE;
+    });
+    std::optional<size_t> preferred;
+    for (size_t c : order)
+        if (!preferred || fits[c]->heldOutE < (1 - kHeldOutGain) * fits[*preferred]->heldOutE) preferred = c;
+    return preferred;
+}
+
 std::optional<std::string> runsDisagree(const std::vector<ModelFit>& runFits) {
     if (runFits.size() < 2) return std::nullopt;
     for (size_t i = 0; i < runFits.front().parameters.size(); ++i) {
@@ -115,34 +129,53 @@ const char* toString(Verdict verdict) {
 }
 
 Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, const std::vector<Judged>& candidates,
-                    const NoiseFloor& noise, const Unfitted& unfitted, const std::vector<ModelFit>& runFits) {
+                    const NoiseFloor& noise, const Unfitted& unfitted, const std::vector<ModelFit>& runFits,
+                    std::optional<double> baseCrossRunE) {
     Conclusion conclusion;
     conclusion.runsDisagreement = runsDisagree(runFits);
     const double visible = noise.visibleShare();
-    std::optional<size_t> best;
-    std::vector<std::string> withinScatter, cutShort;
+    std::vector<std::string> withinScatter, cutShort, notAcrossRuns, untestedAcrossRuns;
     for (size_t c = 0; c < candidates.size(); ++c) {
         const ModelFit& fit = *candidates[c].fit;
         CandidateVerdict& v = conclusion.candidates.emplace_back();
         v.gain = base.heldOutE - fit.heldOutE;
         v.relativeGain = base.heldOutE > 0 ? v.gain / base.heldOutE : 0.0;
         v.aboveNoise = v.relativeGain > visible;
-        const bool predictsBetter = v.relativeGain > kHeldOutGain && fit.bic < base.bic && !candidates[c].vanishes;
+        if (baseCrossRunE && candidates[c].crossRunE && *baseCrossRunE > 0)
+            v.crossRunGain = 1 - *candidates[c].crossRunE / *baseCrossRunE;
+        const bool splitGain = v.relativeGain > kHeldOutGain && !candidates[c].vanishes;
+        const bool acrossRuns = v.crossRunGain && *v.crossRunGain > std::max(kHeldOutGain, visible);
+        const bool predictsBetter = splitGain && (baseCrossRunE ? acrossRuns : fit.bic < base.bic);
         v.earns = predictsBetter && v.aboveNoise;
-        if (v.earns && (!best || fit.heldOutE < candidates[*best].fit->heldOutE)) best = c;
         if (predictsBetter && !v.aboveNoise)
             withinScatter.push_back(candidates[c].effect->title + " predicts the held-out frames " + percent(v.relativeGain) +
                                     " better, within the scatter");
+        if (splitGain && v.aboveNoise && v.crossRunGain && !acrossRuns)
+            notAcrossRuns.push_back(candidates[c].effect->title + " predicts the held-out frames " + percent(v.relativeGain) +
+                                    " better, but fitted to each run alone it predicts the other runs " +
+                                    (*v.crossRunGain >= 0 ? percent(*v.crossRunGain) + " better" : percent(-*v.crossRunGain) + " worse") +
+                                    " than the base does, under the " + percent(std::max(kHeldOutGain, visible)) +
+                                    " a law of the liquid must carry across geometries");
+        if (splitGain && v.aboveNoise && baseCrossRunE && !v.crossRunGain) untestedAcrossRuns.push_back(candidates[c].effect->title);
         if (!fit.searchCompleted()) cutShort.push_back(fit.model);
     }
+    std::vector<const ModelFit*> fits;
+    std::vector<bool> earns;
+    for (size_t c = 0; c < candidates.size(); ++c) {
+        fits.push_back(candidates[c].fit);
+        earns.push_back(conclusion.candidates[c].earns);
+    }
+    const std::optional<size_t> best = preferredFit(fits, earns);
     const std::string scatter = scatterPhrase(noise);
     if (best && base.searchCompleted()) {
         const Judged& named = candidates[*best];
         conclusion.verdict = Verdict::MissingEffect;
         conclusion.chosen = best;
+        const CandidateVerdict& v = conclusion.candidates[*best];
         conclusion.sentence = "missing effect: " + named.effect->title + " (" + named.effect->name +
-                              "): it predicts the held-out frames " + percent(conclusion.candidates[*best].relativeGain) +
-                              " better than the base fit, and " + scatter;
+                              "): it predicts the held-out frames " + percent(v.relativeGain) + " better than the base fit" +
+                              (v.crossRunGain ? ", and fitted to each run alone the other runs " + percent(*v.crossRunGain) + " better," : "") +
+                              " and " + scatter;
         return conclusion;
     }
     std::vector<std::string> why;
@@ -167,6 +200,15 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
     if (!withinScatter.empty()) {
         why.push_back(joined(withinScatter));
         lessScatter(job, conclusion);
+    }
+    if (!notAcrossRuns.empty()) {
+        why.push_back(joined(notAcrossRuns));
+        addOnce(conclusion.whatWouldTell, {"the candidates fitted longer, or other candidates (--effects)"});
+    }
+    if (!untestedAcrossRuns.empty()) {
+        why.push_back(joined(untestedAcrossRuns) + " predicted the held-out frames better but was not fitted to each "
+                      "run alone, which would test it across the runs");
+        moreTime(timeBudget, conclusion);
     }
     if (!(visible <= kHeldOutGain)) {
         why.push_back(noise.heldOutE.size() < 2 ? std::string("the simulation's scatter was not measured")

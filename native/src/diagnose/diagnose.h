@@ -60,6 +60,9 @@ struct ModelFit {
     double bic = 0;        // N ln(fittedE / N) + k ln N over the N fitted frames
     std::optional<double> trackError;  // relative L2 of the measured track over all frames (first run)
     std::optional<double> shearRate;   // 1/s, the flow's at θ* over all frames (Evaluation::shearRate)
+    // 1/s, the shear rates the flow at θ* exercised: the 10th and 90th percentiles of every run's
+    // frames' (Evaluation::frameShearRates), each frame counted once; none for the thin film.
+    std::optional<std::array<double, 2>> shearRateRange;
     long evaluations = 0;
     double seconds = 0;          // the search's
     double scoringSeconds = 0;   // θ* simulated again over every frame of every run

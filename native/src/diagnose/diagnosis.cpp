@@ -9,10 +9,12 @@
 
 #include "diagnose/conclusion.h"
 #include "diagnose/effects/effects.h"
+#include "diagnose/flow_curve.h"
 #include "diagnose/model_fit.h"
 #include "sim/sim.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <numeric>
 
@@ -179,7 +181,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     }
     // With several runs, the base fitted to each alone too (nothing to fit when every unknown is fixed).
     const int runFits = job.otherRuns.empty() || job.parameters.empty() ? 0 : 1 + static_cast<int>(job.otherRuns.size());
-    const int fits = 1 + static_cast<int>(candidates.size()) + runFits;
+    // And the best contender's fits to each run alone, which test it across the runs.
+    int crossRunFits = candidates.empty() ? 0 : runFits;
+    const int fits = 1 + static_cast<int>(candidates.size()) + runFits + crossRunFits;
     // The steps the progress counts: the fits and the noise floor after the base's.
     const bool measuresScatter = options.scatterReplicas > 0;
     int steps = fits + (measuresScatter ? 1 : 0);
@@ -208,8 +212,9 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     json runsDoc = json::array();
     if (runFits > 0 && !budget.holds(cost.leastFit(job, int(job.parameters.size())))) {
         warn("diagnose: the time budget cannot hold the base's fits to each run alone: the runs are not compared");
-        budget.forgo(runFits);
-        steps -= runFits;
+        budget.forgo(runFits + crossRunFits);
+        steps -= runFits + crossRunFits;
+        crossRunFits = 0;
     } else if (runFits > 0) {
         json parameters = json::array();
         for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], diagnosis.base.theta[i]));
@@ -371,10 +376,79 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                  "held-out frames " + std::to_string(int(std::lround(100 * (1 - fit.heldOutE / base.heldOutE)))) +
                  " % better than the base fit: the base fit is not converged (more generations or time, or fewer "
                  "--effects to share them)");
-        judged.push_back({&fit, candidates[c], vanishes});
+        judged.push_back({&fit, candidates[c], vanishes, std::nullopt});
     }
-    const Conclusion conclusion =
-        conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget, diagnosis.runFits);
+    // Across the runs: what each run's base fit predicts of the other runs, and what the best
+    // contender's fits to each run alone do, restarted at its fit to them all (conclusion.h).
+    std::optional<double> baseCrossRunE;
+    std::vector<json> crossRunDocs(diagnosis.candidates.size());
+    std::optional<size_t> contender;
+    json testedAcrossRuns;  // its name
+    if (!diagnosis.runFits.empty()) {
+        const auto started = std::chrono::steady_clock::now();
+        double E = 0;
+        for (size_t r = 0; r < diagnosis.runFits.size(); ++r)
+            E += predictOtherRuns(job, observations, fitCounts, diagnosis.runFits[r].theta, r);
+        const double predictionSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+        budget.spend(predictionSeconds);
+        baseCrossRunE = E;
+        // The one the conclusion would name of those that predict the held-out frames clearly better.
+        const double margin = std::max(kHeldOutGain, diagnosis.noise.visibleShare());
+        std::vector<const ModelFit*> fits;
+        std::vector<bool> gains;
+        for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
+            fits.push_back(&diagnosis.candidates[c]);
+            gains.push_back(fits.back()->heldOutE < (1 - margin) * base.heldOutE && !judged[c].vanishes);
+        }
+        contender = preferredFit(fits, gains);
+        if (contender) {
+            const ModelFit& fit = diagnosis.candidates[*contender];
+            const double least = cost.leastFit(job, int(fit.theta.size())) + predictionSeconds;
+            if (!budget.holds(least)) {
+                warn("diagnose: no time left to fit " + fit.model + " to each run alone (about " +
+                     std::to_string(std::lround(least)) + " s at least): it is not tested across the runs");
+                contender.reset();
+            }
+        }
+        if (!contender) {
+            budget.forgo(crossRunFits);
+            steps -= crossRunFits;
+        }
+    }
+    if (contender) {
+        const size_t c = *contender;
+        const ModelFit& fit = diagnosis.candidates[c];
+        json parameters = json::array();
+        for (size_t i = 0; i < fit.theta.size(); ++i) parameters.push_back(warmStart(models[c].parameters[i], fit.theta[i]));
+        const std::vector<Job> runs = runsOf(models[c]);
+        double crossRunE = 0;
+        json perRun = json::array();
+        for (size_t r = 0; r < runs.size(); ++r) {
+            const std::string folder = fit.model + "_run" + std::to_string(r + 1);
+            if (options.onFit) options.onFit(folder, step++, steps, fit.parameters);
+            IdentifyOptions identifyOptions = options.identify;
+            identifyOptions.knownPoint = fit.theta;
+            json series;
+            ModelFit runFit = fitModel(fit.model, runs[r],
+                                       screenedOnOnePlacement(modelJob(runs[r], candidates[c], parameters, {fitCounts[r]})),
+                                       {observations[r]}, {fitCounts[r]}, outDir / "fits" / folder, identifyOptions,
+                                       budget.nextSearch(), series);
+            const auto started = std::chrono::steady_clock::now();
+            const double predicted = predictOtherRuns(models[c], observations, fitCounts, runFit.theta, r);
+            runFit.scoringSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+            budget.spend(runFit);
+            crossRunE += predicted;
+            json entry = toJson(runFit, series, folder);
+            entry["run"] = r + 1;
+            entry["other_runs_E"] = predicted;
+            perRun.push_back(entry);
+        }
+        judged[c].crossRunE = crossRunE;
+        crossRunDocs[c] = {{"E", crossRunE}, {"per_run", perRun}};
+        testedAcrossRuns = fit.model;
+    }
+    const Conclusion conclusion = conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget,
+                                           diagnosis.runFits, baseCrossRunE);
     diagnosis.verdict = conclusion.verdict;
     diagnosis.chosen = conclusion.chosen;
     for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
@@ -387,6 +461,10 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         entry["above_noise"] = v.aboveNoise;
         entry["effect_vanishes"] = judged[c].vanishes;
         entry["earns_its_parameters"] = v.earns;
+        if (!crossRunDocs[c].is_null()) {
+            entry["cross_run"] = crossRunDocs[c];
+            entry["cross_run"]["gain"] = v.crossRunGain ? json(*v.crossRunGain) : json();
+        }
         candidatesDoc.push_back(entry);
     }
     if (conclusion.verdict == Verdict::CannotTell) {
@@ -412,6 +490,16 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     json notTried = json::array();
     for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
     const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
+    const json curve = flowCurve(after, diagnosis.chosen ? models[*diagnosis.chosen] : job);
+    if (curve.contains("rheometer") && curve.at("rheometer").at("log_stress_rms").is_number()) {
+        const double rms = curve.at("rheometer").at("log_stress_rms").get<double>();
+        if (rms > kRheometerLogStressWarning)
+            warn("diagnose: the flow curve of " + after.model + " lies " + formatNumber(rms) +
+                 " (log10 of stress, RMS) off the job's rheometer over the shear rates both cover: the liquid "
+                 "filmed may not be the one measured, or the law found is not the liquid's");
+    } else if (curve.contains("rheometer")) {
+        warn("diagnose: the job's rheometer curve does not reach the shear rates the flow exercised: not compared");
+    }
     json errors{{"E", {{"before", base.wholeE}, {"after", after.wholeE}}},
                 {"held_out_E", {{"before", base.heldOutE}, {"after", after.heldOutE}}}};
     if (base.trackError && after.trackError)
@@ -429,8 +517,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         {"criterion", "fitted on each run's first " + std::to_string(int(std::lround(100 * options.fitShare))) +
                           " % of compared frames; an effect earns its parameters when its E over the held-out rest is "
                           "below " + std::to_string(int(std::lround(100 * (1 - kHeldOutGain)))) +
-                          " % of the base's, its gain exceeds the share the noise floor explains (visible_share), its "
-                          "BIC over the fitted frames is below the base's, and the base fit's search was not cut short"},
+                          " % of the base's, its gain exceeds the share the noise floor explains (visible_share), " +
+                          (baseCrossRunE ? "its fits to each run alone predict the other runs by as much better than the "
+                                           "base's do (cross_run)"
+                                         : "its BIC over the fitted frames is below the base's") +
+                          ", and the base fit's search was not cut short"},
         {"noise_floor", noiseJson},
         {"fitted_frames", fitCounts},
         {"time_budget_s", options.timeBudget},
@@ -439,12 +530,16 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         {"base", toJson(base, baseSeries, baseFolder)},
         {"candidates", candidatesDoc},
         {"not_tried", notTried},
-        {"errors", errors}};
+        {"errors", errors},
+        {"flow_curve", curve}};
     if (!baseRefit.is_null()) diagnosis.document["base_refit"] = baseRefit;
     if (!runsDoc.empty()) {
         diagnosis.document["base_per_run"] = runsDoc;
         diagnosis.document["runs_disagree"] =
             conclusion.runsDisagreement ? json(*conclusion.runsDisagreement) : json();
+        diagnosis.document["cross_run"] = {
+            {"base_E", baseCrossRunE ? json(*baseCrossRunE) : json()},
+            {"tested", testedAcrossRuns}};
     }
     writeJsonAtomically(diagnosis.document, outDir / "diagnosis.json");
     return diagnosis;

@@ -88,6 +88,7 @@ struct RunScore {
     double fitted = 0, heldOut = 0, whole = 0;
     int fittedFrames = 0;
     std::optional<double> trackError, shearRate;
+    std::vector<double> frameShearRates;
     json series = json::array();
 };
 
@@ -124,6 +125,7 @@ RunScore scoreRun(const Job& asked, const Observation& obs, const std::vector<do
     score.fittedFrames = fitCount;
     score.trackError = ev.trackError;
     score.shearRate = ev.shearRate;
+    score.frameShearRates = ev.frameShearRates;
     for (size_t k = 0; k < frames.size(); ++k) {
         const size_t i = frames[k];
         json point{{"time_s", obs.reference.times[i]}, {"sim_frame", obs.simFrames[i]}, {"fitted", k < size_t(fitCount)}};
@@ -135,6 +137,22 @@ RunScore scoreRun(const Job& asked, const Observation& obs, const std::vector<do
         score.series.push_back(point);
     }
     return score;
+}
+
+// The share of frames the shear-rate range leaves out at each end: a frame's rate is a mean over its
+// liquid, and the first frame's is the release's, not the liquid's flow.
+constexpr double kShearRateRangeShare = 0.1;
+
+// The `share` and 1 − `share` percentiles of `values`, linearly interpolated between ranks.
+std::array<double, 2> percentiles(std::vector<double> values, double share) {
+    std::sort(values.begin(), values.end());
+    const auto at = [&](double q) {
+        const double rank = q * double(values.size() - 1);
+        const size_t below = size_t(std::floor(rank));
+        const size_t above = std::min(below + 1, values.size() - 1);
+        return values[below] + (rank - double(below)) * (values[above] - values[below]);
+    };
+    return {at(share), at(1 - share)};
 }
 
 }  // namespace
@@ -181,8 +199,10 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
     int fittedFrames = 0;
     runSeries = json::array();
     const auto scoringStart = std::chrono::steady_clock::now();
+    std::vector<double> frameShearRates;
     for (size_t r = 0; r < runs.size(); ++r) {
         const RunScore score = scoreRun(runs[r], observations[r], fit.theta, fitCounts[r]);
+        frameShearRates.insert(frameShearRates.end(), score.frameShearRates.begin(), score.frameShearRates.end());
         fit.fittedE += score.fitted;
         fit.heldOutE += score.heldOut;
         fit.wholeE += score.whole;
@@ -194,6 +214,7 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
         runSeries.push_back(score.series);
     }
     fit.scoringSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - scoringStart).count();
+    if (!frameShearRates.empty()) fit.shearRateRange = percentiles(frameShearRates, kShearRateRangeShare);
     const double n = fittedFrames, k = double(fit.theta.size());
     fit.bic = n * std::log(std::max(fit.fittedE, 1e-300) / n) + k * std::log(n);
     return fit;
@@ -215,6 +236,15 @@ double FitCost::leastFit(const Job& job, int dimension) const {
 
 bool ModelFit::searchCompleted() const {
     return !stop || (*stop != StopReason::TimeBudget && *stop != StopReason::Cancelled);
+}
+
+double predictOtherRuns(const Job& full, const std::vector<Observation>& observations, const std::vector<int>& fitCounts,
+                        const std::vector<double>& theta, size_t except) {
+    const std::vector<Job> runs = runsOf(full);
+    double E = 0;
+    for (size_t r = 0; r < runs.size(); ++r)
+        if (r != except) E += scoreRun(runs[r], observations[r], theta, fitCounts[r]).whole;
+    return E;
 }
 
 NoiseFloor measureScatter(const Job& full, const std::vector<Observation>& observations,
@@ -249,6 +279,7 @@ json toJson(const ModelFit& fit, const json& series, const std::string& folder) 
              {"doubts", fit.doubts}};
     if (fit.trackError) doc["track_error"] = *fit.trackError;
     if (fit.shearRate) doc["shear_rate_per_s"] = *fit.shearRate;
+    if (fit.shearRateRange) doc["shear_rate_range_per_s"] = *fit.shearRateRange;
     if (fit.stop) doc["stopped"] = toString(*fit.stop);
     return doc;
 }

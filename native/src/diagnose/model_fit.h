@@ -42,6 +42,7 @@ class FitBudget {
     bool holds(double seconds) const;
     void spend(const ModelFit& fit);
     void spend(const NoiseFloor& noise);
+    void spend(double scoringSeconds) { spent_ += scoringSeconds; }  // scorings outside a fit
     void forgo(int fits) { fitsLeft_ -= fits; }  // fits that will not run share no more of it
     double spent() const { return spent_; }
 
@@ -69,6 +70,11 @@ ModelFit fitModel(const std::string& model, const identify::Job& full, identify:
                   const std::vector<identify::Observation>& observations, const std::vector<int>& fitCounts,
                   const std::filesystem::path& dir, identify::IdentifyOptions identifyOptions, double searchBudget,
                   nlohmann::json& runSeries);
+
+// The whole E that θ (in `full`'s model) scores over every run of `full` but `except`: what a fit to
+// run `except` alone predicts of the others.
+double predictOtherRuns(const identify::Job& full, const std::vector<identify::Observation>& observations,
+                        const std::vector<int>& fitCounts, const std::vector<double>& theta, size_t except);
 
 // The noise floor at `fit`'s θ* (scored already: its held-out E is the first sample): each of
 // `replicas` scores every run again on grid placements moved between the scoring's and on

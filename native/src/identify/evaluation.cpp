@@ -377,6 +377,7 @@ Evaluation evaluateOnGrid(const Job& job, const Observation& obs, const std::vec
             if (stats.dissipationWeight > 0) {
                 dissipationWeight += stats.dissipationWeight;
                 weightedLogShearRate += stats.dissipationWeight * std::log(stats.shearRate);
+                ev.frameShearRates.push_back(stats.shearRate);
             }
         }
         auto lap = Clock::now();

@@ -91,6 +91,9 @@ struct Evaluation {
     // frames weighted by their dissipation), of the first run's first placement; none for the
     // thin-film model or a liquid at rest. Diagnose starts its power law there.
     std::optional<double> shearRate;
+    // Of the same simulation, each frame's FrameStats::shearRate, frames at rest left out: the
+    // spread of shear rates the flow exercised.
+    std::vector<double> frameShearRates;
     // With several runs, each run's E (their sum is E); frameE, the track error and the fields are
     // the first run's.
     std::vector<double> runE;

@@ -190,6 +190,24 @@ void requireFilmJob(Job& job, const nlohmann::json& doc, const std::string& orig
 
 // {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
 // keys and its entry's, so that every check a single-run job gets applies to each run alike.
+// A rheometer's flow curve: at least two rows of positive shear rate and stress.
+std::vector<std::array<double, 2>> loadRheometer(const fs::path& file) {
+    if (!fs::exists(file)) throw InputError(file.string() + ": rheometer: not found");
+    const ScalarTrack csv = loadScalarTrackCsv(file, "shear_rate_per_s");
+    const auto stress = std::find(csv.columns.begin(), csv.columns.end(), "stress_pa");
+    if (stress == csv.columns.end()) throw InputError(file.string() + ": rheometer: no column \"stress_pa\"");
+    const std::vector<double>& stresses = csv.values[stress - csv.columns.begin()];
+    std::vector<std::array<double, 2>> curve;
+    for (size_t i = 0; i < csv.time.size(); ++i) {
+        if (!(csv.time[i] > 0 && std::isfinite(csv.time[i]) && stresses[i] > 0 && std::isfinite(stresses[i])))
+            throw InputError(file.string() + ":" + std::to_string(i + 2) + ": rheometer: shear rate and stress must be "
+                             "positive numbers, got " + formatNumber(csv.time[i]) + ", " + formatNumber(stresses[i]));
+        curve.push_back({csv.time[i], stresses[i]});
+    }
+    if (curve.size() < 2) throw InputError(file.string() + ": rheometer: needs at least two rows");
+    return curve;
+}
+
 Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
     const nlohmann::json& runs = doc.at("runs");
     if (!runs.is_array() || runs.empty()) throw InputError(origin + ": runs: must be a non-empty array of runs");
@@ -265,7 +283,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
     std::vector<std::string> known{"format", "version", "parameters", "fixed", "resolution", "max_generations", "seed",
                                    "population", "tolerance_x", "tolerance_fun", "time_budget_s", "silhouette_method",
                                    "alignment_check", "resolution_check", "grid_placements", "grid_placement_schedule",
-                                   "silhouette_comparison", "fidelity", "forward_model", "runs"};
+                                   "silhouette_comparison", "fidelity", "forward_model", "rheometer", "runs"};
     known.insert(known.end(), runKeys().begin(), runKeys().end());
     rejectUnknownKeys(doc, known, origin + ": ");
     if (doc.contains("runs")) return parseRuns(doc, origin, baseDir);
@@ -440,6 +458,7 @@ Job parseJob(const nlohmann::json& doc, const std::string& origin, const fs::pat
             throw InputError(origin + ": forward_model: expected \"simulation\" or \"thin_film\", got \"" + *model + "\"");
     }
     if (job.forwardModel == ForwardModel::ThinFilm) requireFilmJob(job, doc, origin);
+    if (const auto rheometer = optionalString(doc, "rheometer", origin)) job.rheometer = loadRheometer(resolve(baseDir, *rheometer));
     // Check the reference against the camera now, before any simulation.
     if (silhouettes) {
         const ReferenceManifest reference = loadReferenceManifest(job.referenceDir);

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -155,6 +156,10 @@ struct Job {
     PlacementSchedule placementSchedule = PlacementSchedule::ByGeneration;
     ForwardModel forwardModel = ForwardModel::Simulation;
     FidelitySchedule fidelity;
+    // The liquid's flow curve measured on a rheometer, the job's "rheometer" CSV (columns
+    // shear_rate_per_s, stress_pa; rising shear rates): diagnose compares the flow curve it finds
+    // with it. Empty: none.
+    std::vector<std::array<double, 2>> rheometer;  // (γ̇ 1/s, τ Pa)
     nlohmann::json document;  // the parsed job (for the checkpoint's fingerprint)
     // A job with "runs" (several runs of one liquid, each its own scene and reference, sharing the
     // material's parameters) is its first run, with the others here: each a Job of its own scene,

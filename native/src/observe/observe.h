@@ -155,8 +155,9 @@ struct ScalarTrack {
 
 // A measured CSV: a header whose first column is the time in seconds ("time_s"), then value
 // columns in SI units, one row per sample (see shared/data/measured/README.md). Throws InputError
-// naming the file and line.
-ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file);
+// naming the file and line. With another `firstColumn` (a rheometer's "shear_rate_per_s"), `time`
+// holds that column's values, which must not decrease either.
+ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file, const std::string& firstColumn = "time_s");
 void saveScalarTrackCsv(const ScalarTrack& track, const std::filesystem::path& file);
 
 // An image ray: from `origin` (px) along `direction` (px, any length).

@@ -48,15 +48,15 @@ double parseCsvNumber(const std::string& field, const std::string& where) {
 
 }  // namespace
 
-ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file) {
+ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file, const std::string& firstColumn) {
     std::ifstream stream(file);
     if (!stream) throw InputError(file.string() + ": cannot open scalar-track CSV");
     std::string line;
     if (!std::getline(stream, line)) throw InputError(file.string() + ": empty file, expected a header line");
     std::vector<std::string> header = splitCsvLine(trimmed(line));
     for (std::string& name : header) name = trimmed(name);
-    if (header.size() < 2 || header[0] != "time_s")
-        throw InputError(file.string() + ":1: header must start with \"time_s\" and name at least one value column");
+    if (header.size() < 2 || header[0] != firstColumn)
+        throw InputError(file.string() + ":1: header must start with \"" + firstColumn + "\" and name at least one value column");
     ScalarTrack track;
     track.columns.assign(header.begin() + 1, header.end());
     track.values.resize(track.columns.size());
@@ -68,7 +68,7 @@ ScalarTrack loadScalarTrackCsv(const std::filesystem::path& file) {
             throw InputError(where + ": expected " + std::to_string(header.size()) + " fields, got " +
                              std::to_string(fields.size()));
         const double time = parseCsvNumber(fields[0], where);
-        if (!track.time.empty() && time < track.time.back()) throw InputError(where + ": time_s goes backwards");
+        if (!track.time.empty() && time < track.time.back()) throw InputError(where + ": " + firstColumn + " goes backwards");
         track.time.push_back(time);
         for (size_t c = 0; c < track.columns.size(); ++c) track.values[c].push_back(parseCsvNumber(fields[c + 1], where));
     }

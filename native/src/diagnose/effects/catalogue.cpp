@@ -5,7 +5,7 @@
 namespace viscoscope::diagnose {
 
 const std::vector<Effect>& effects() {
-    static const std::vector<Effect> catalogue{shearThinning(), yieldStress(), wallSlip(), sideWalls()};
+    static const std::vector<Effect> catalogue{shearThinning(), yieldStress(), wallSlip(), sideWalls(), herschelBulkley()};
     return catalogue;
 }
 

@@ -14,28 +14,36 @@ constexpr double kStartFlowIndex = 0.8;
 constexpr double kLeastScannedFlowIndex = 0.25;
 
 std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) {
+    added.push_back(thinningConsistency(base));
+    added.push_back(flowIndex());
+    return "";
+}
+
+}  // namespace
+
+AddedParameter thinningConsistency(const BaseFit& base) {
     // K from η* with a wide spread: where the base flow's shear rate is known (not on a thin film),
-    // the first generation scans the ridge (startCurve) instead of sampling around this.
+    // the first generation scans the ridge (thinningRidge) instead of sampling around this.
     const identify::ParameterSpec& eta = *std::find_if(base.job.parameters.begin(), base.job.parameters.end(),
                                                        [](const identify::ParameterSpec& p) { return p.name() == "viscosity"; });
     nlohmann::json consistency = searchedParameter("consistency", *base.value("viscosity"), kNewLogSpread);
     consistency["min"] = eta.lower;
     consistency["max"] = eta.upper;
-    added.push_back({consistency, *base.value("viscosity"), true});
+    return {consistency, *base.value("viscosity"), true};
+}
+
+AddedParameter flowIndex() {
     // Thinning only (n ≤ 1), so that n = 1 is the base: a free n absorbed the difference of the
     // reference's grid in a Newtonian control and predicted it better (tests/bench/FINDINGS.md,
     // "Diagnose on synthetic fronts").
     nlohmann::json index = searchedParameter("flow_index", kStartFlowIndex, 0.3);
     index["max"] = 1.0;
-    added.push_back({index, 1.0});
-    return "";
+    return {index, 1.0};
 }
 
-// The curve of (K, n) that flow as the base fit at the base flow's shear rate γ̇_c, K = η* γ̇_c^(1−n),
-// from n = 1 (the base's own flow) at s = 0 down to kLeastScannedFlowIndex at s = 1, the other
-// parameters at their starts: from independent samples of K and n, the synthetic fronts' hidden
-// power law was missed (FINDINGS, "Diagnose on synthetic fronts").
-StartCurve ridge(const nlohmann::json& parameters, const BaseFit& base) {
+// From independent samples of K and n, the synthetic fronts' hidden power law was missed (FINDINGS,
+// "Diagnose on synthetic fronts").
+StartCurve thinningRidge(const nlohmann::json& parameters, const BaseFit& base) {
     if (!base.shearRate) return {};
     std::vector<double> start;
     size_t consistency = 0, index = 0;
@@ -55,8 +63,6 @@ StartCurve ridge(const nlohmann::json& parameters, const BaseFit& base) {
     };
 }
 
-}  // namespace
-
 Effect shearThinning() {
     Effect effect;
     effect.name = "shear_thinning";
@@ -65,7 +71,7 @@ Effect shearThinning() {
     effect.source = "Ostwald–de Waele power law; a gravity current spreads as t^{n/(3n+5)} (DESIGN.md)";
     effect.law = [](double eta) -> MaterialModel { return PowerLaw{eta, 1.0}; };
     effect.parameters = parameters;
-    effect.startCurve = ridge;
+    effect.startCurve = thinningRidge;
     return effect;
 }
 

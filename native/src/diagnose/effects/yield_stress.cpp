@@ -40,9 +40,16 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
     consistency["min"] = std::max(eta.lower, etaStar / 100);
     consistency["max"] = etaStar;
     added.push_back({consistency, etaStar, true});
+    added.push_back(yieldStressParameter(base));
+    return "";
+}
+
+}  // namespace
+
+AddedParameter yieldStressParameter(const BaseFit& base) {
     // τ_y up to the liquid's hydrostatic stress ρ g h₀, from a tenth of it, and down to a hundredth
     // of it: below, a yield stress hardly changes the flow and E is flat over many decades of ln τ_y,
-    // where the search drifted (FINDINGS, as above). Down to a hundredth of the base flow's viscous
+    // where the search drifted (tests/bench/FINDINGS.md, "Diagnose on synthetic fronts"). Down to a hundredth of the base flow's viscous
     // stress η* γ̇_c where that is less: the least τ_y is the base-equivalent point, and in a slow
     // flow a hundredth of ρ g h₀ arrests the front (FINDINGS, "The particle-laden dam break with
     // every candidate").
@@ -50,14 +57,11 @@ std::string parameters(const BaseFit& base, std::vector<AddedParameter>& added) 
         searchedParameter("yield_stress", findParameterDeclaration("yield_stress")->searchInitial, kNewLogSpread);
     if (const double stress = hydrostaticStress(base.job.scene); stress > 0) {
         yieldStress = searchedParameter("yield_stress", 0.1 * stress, 1.0);
-        yieldStress["min"] = std::min(0.01 * stress, base.shearRate ? 0.01 * etaStar * *base.shearRate : INFINITY);
+        yieldStress["min"] = std::min(0.01 * stress, base.shearRate ? 0.01 * *base.value("viscosity") * *base.shearRate : INFINITY);
         yieldStress["max"] = stress;
     }
-    added.push_back({yieldStress});
-    return "";
+    return {yieldStress};
 }
-
-}  // namespace
 
 Effect yieldStress() {
     Effect effect;
