@@ -63,7 +63,7 @@ def flow_curve(ax, curve):
     ax.set_yscale("log")
     ax.set_xlabel("shear rate (1/s)")
     ax.set_ylabel("stress (Pa)")
-    ax.set_title("flow curve over the exercised shear rates", fontsize=10)
+    ax.set_title("flow curve (line: the shear rates exercised)", fontsize=10)
     ax.legend(fontsize=8)
 
 
@@ -84,7 +84,7 @@ def main(out_dir):
             evaluations = list(csv.DictReader(fh))
     curve = diagnosis.get("flow_curve")
     columns = max(2 if curve else 1, len(new))
-    fig = plt.figure(figsize=(7, 3 * (runs + 1 + bool(evaluations))))
+    fig = plt.figure(figsize=(11 if curve else 7, 3 * (runs + 1 + bool(evaluations))))
     grid = fig.add_gridspec(runs + 1 + bool(evaluations), columns)
     for r in range(runs):
         ax = fig.add_subplot(grid[r, :])
@@ -108,10 +108,10 @@ def main(out_dir):
         ax.axhline(base["held_out_E"] * (1 - visible), color="C1", linestyle=":",
                    label="held-out E a named effect must beat (noise floor)")
     ax.set_xticks(list(x))
-    ax.set_xticklabels([m["model"] for m in models])
+    ax.set_xticklabels([m["model"] for m in models], rotation=20, fontsize=8)
     ax.set_yscale("log")
     ax.set_ylabel("E")
-    ax.legend()
+    ax.legend(fontsize=8)
     if curve:
         flow_curve(fig.add_subplot(grid[runs, columns - 1]), curve)
     for k, name in enumerate(new if evaluations else []):

@@ -207,32 +207,51 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
              std::to_string(diagnosis.base.evaluations) + " evaluations: no effect will be named unless its refit "
              "completes (a larger --time-budget, or 0 to give each fit the job's own)");
     FitCost cost = FitCost::of(diagnosis.base);
+    // The model `name` (`model`: its job over every run, with `effect`'s law) fitted to each run alone
+    // over its fitted frames, restarted at `theta` and scoring it as a known point, into
+    // fits/<name>_run<k>; each fit is scored on the other runs too (what it predicts of them). Their
+    // entries for diagnosis.json.
+    const auto fitEachRunAlone = [&](const std::string& name, const Job& model, const Effect* effect,
+                                     const std::vector<double>& theta, std::vector<ModelFit>& runFitsOut,
+                                     double& otherRunsE) {
+        json parameters = json::array();
+        for (size_t i = 0; i < model.parameters.size(); ++i) parameters.push_back(warmStart(model.parameters[i], theta[i]));
+        const std::vector<Job> runs = runsOf(model);
+        json entries = json::array();
+        otherRunsE = 0;
+        for (size_t r = 0; r < runs.size(); ++r) {
+            const std::string folder = name + "_run" + std::to_string(r + 1);
+            if (options.onFit) options.onFit(folder, step++, steps, parameterNames(model));
+            IdentifyOptions identifyOptions = options.identify;
+            identifyOptions.knownPoint = theta;
+            json series;
+            ModelFit& fit = runFitsOut.emplace_back(
+                fitModel(name, runs[r],
+                         screenedOnOnePlacement(modelJob(runs[r], effect, parameters, {fitCounts[r]})), {observations[r]},
+                         {fitCounts[r]}, outDir / "fits" / folder, identifyOptions, budget.nextSearch(), series));
+            const auto started = std::chrono::steady_clock::now();
+            const double predicted = predictOtherRuns(model, observations, fitCounts, fit.theta, r);
+            fit.scoringSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+            budget.spend(fit);
+            otherRunsE += predicted;
+            json entry = toJson(fit, series, folder);
+            entry["run"] = r + 1;
+            entry["other_runs_E"] = predicted;
+            entries.push_back(entry);
+        }
+        return entries;
+    };
     // Each run alone, restarted at the base fit: about one base fit's least in all, each run holding
     // its share of the frames.
     json runsDoc = json::array();
+    std::optional<double> baseCrossRunE;  // what the base's fits to each run alone predict of the others
     if (runFits > 0 && !budget.holds(cost.leastFit(job, int(job.parameters.size())))) {
         warn("diagnose: the time budget cannot hold the base's fits to each run alone: the runs are not compared");
         budget.forgo(runFits + crossRunFits);
         steps -= runFits + crossRunFits;
         crossRunFits = 0;
     } else if (runFits > 0) {
-        json parameters = json::array();
-        for (size_t i = 0; i < job.parameters.size(); ++i) parameters.push_back(warmStart(job.parameters[i], diagnosis.base.theta[i]));
-        const std::vector<Job> runs = runsOf(job);
-        for (size_t r = 0; r < runs.size(); ++r) {
-            const std::string folder = "base_run" + std::to_string(r + 1);
-            if (options.onFit) options.onFit(folder, step++, steps, parameterNames(job));
-            IdentifyOptions identifyOptions = options.identify;
-            identifyOptions.knownPoint = diagnosis.base.theta;
-            json series;
-            diagnosis.runFits.push_back(fitModel("base", runs[r], modelJob(runs[r], nullptr, parameters, {fitCounts[r]}),
-                                                 {observations[r]}, {fitCounts[r]}, outDir / "fits" / folder,
-                                                 identifyOptions, budget.nextSearch(), series));
-            budget.spend(diagnosis.runFits.back());
-            json entry = toJson(diagnosis.runFits.back(), series, folder);
-            entry["run"] = r + 1;
-            runsDoc.push_back(entry);
-        }
+        runsDoc = fitEachRunAlone("base", job, nullptr, diagnosis.base.theta, diagnosis.runFits, baseCrossRunE.emplace());
     }
     const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
     std::vector<Candidate> fitted(candidates.size());  // each candidate as it is fitted
@@ -378,20 +397,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
                  "--effects to share them)");
         judged.push_back({&fit, candidates[c], vanishes, std::nullopt});
     }
-    // Across the runs: what each run's base fit predicts of the other runs, and what the best
-    // contender's fits to each run alone do, restarted at its fit to them all (conclusion.h).
-    std::optional<double> baseCrossRunE;
+    // Across the runs: the best contender fitted to each run alone too, restarted at its fit to them
+    // all, and what it predicts of the other runs against what the base's fits to each do (conclusion.h).
     std::vector<json> crossRunDocs(diagnosis.candidates.size());
-    std::optional<size_t> contender;
     json testedAcrossRuns;  // its name
-    if (!diagnosis.runFits.empty()) {
-        const auto started = std::chrono::steady_clock::now();
-        double E = 0;
-        for (size_t r = 0; r < diagnosis.runFits.size(); ++r)
-            E += predictOtherRuns(job, observations, fitCounts, diagnosis.runFits[r].theta, r);
-        const double predictionSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-        budget.spend(predictionSeconds);
-        baseCrossRunE = E;
+    if (baseCrossRunE) {
         // The one the conclusion would name of those that predict the held-out frames clearly better.
         const double margin = std::max(kHeldOutGain, diagnosis.noise.visibleShare());
         std::vector<const ModelFit*> fits;
@@ -400,52 +410,29 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
             fits.push_back(&diagnosis.candidates[c]);
             gains.push_back(fits.back()->heldOutE < (1 - margin) * base.heldOutE && !judged[c].vanishes);
         }
-        contender = preferredFit(fits, gains);
+        std::optional<size_t> contender = preferredFit(fits, gains);
         if (contender) {
             const ModelFit& fit = diagnosis.candidates[*contender];
-            const double least = cost.leastFit(job, int(fit.theta.size())) + predictionSeconds;
+            const double least = cost.leastFit(job, int(fit.theta.size()));
             if (!budget.holds(least)) {
                 warn("diagnose: no time left to fit " + fit.model + " to each run alone (about " +
                      std::to_string(std::lround(least)) + " s at least): it is not tested across the runs");
                 contender.reset();
             }
         }
-        if (!contender) {
+        if (contender) {
+            const size_t c = *contender;
+            std::vector<ModelFit> runFitsOfContender;
+            double crossRunE = 0;
+            const json perRun = fitEachRunAlone(diagnosis.candidates[c].model, models[c], candidates[c],
+                                                diagnosis.candidates[c].theta, runFitsOfContender, crossRunE);
+            judged[c].crossRunE = crossRunE;
+            crossRunDocs[c] = {{"E", crossRunE}, {"per_run", perRun}};
+            testedAcrossRuns = diagnosis.candidates[c].model;
+        } else {
             budget.forgo(crossRunFits);
             steps -= crossRunFits;
         }
-    }
-    if (contender) {
-        const size_t c = *contender;
-        const ModelFit& fit = diagnosis.candidates[c];
-        json parameters = json::array();
-        for (size_t i = 0; i < fit.theta.size(); ++i) parameters.push_back(warmStart(models[c].parameters[i], fit.theta[i]));
-        const std::vector<Job> runs = runsOf(models[c]);
-        double crossRunE = 0;
-        json perRun = json::array();
-        for (size_t r = 0; r < runs.size(); ++r) {
-            const std::string folder = fit.model + "_run" + std::to_string(r + 1);
-            if (options.onFit) options.onFit(folder, step++, steps, fit.parameters);
-            IdentifyOptions identifyOptions = options.identify;
-            identifyOptions.knownPoint = fit.theta;
-            json series;
-            ModelFit runFit = fitModel(fit.model, runs[r],
-                                       screenedOnOnePlacement(modelJob(runs[r], candidates[c], parameters, {fitCounts[r]})),
-                                       {observations[r]}, {fitCounts[r]}, outDir / "fits" / folder, identifyOptions,
-                                       budget.nextSearch(), series);
-            const auto started = std::chrono::steady_clock::now();
-            const double predicted = predictOtherRuns(models[c], observations, fitCounts, runFit.theta, r);
-            runFit.scoringSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-            budget.spend(runFit);
-            crossRunE += predicted;
-            json entry = toJson(runFit, series, folder);
-            entry["run"] = r + 1;
-            entry["other_runs_E"] = predicted;
-            perRun.push_back(entry);
-        }
-        judged[c].crossRunE = crossRunE;
-        crossRunDocs[c] = {{"E", crossRunE}, {"per_run", perRun}};
-        testedAcrossRuns = fit.model;
     }
     const Conclusion conclusion = conclude(job, options.timeBudget, base, judged, diagnosis.noise, beyondBudget,
                                            diagnosis.runFits, baseCrossRunE);
