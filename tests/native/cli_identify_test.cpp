@@ -308,7 +308,7 @@ TEST_F(CliIdentify, DiagnoseRefusesWhatItCannotDiagnoseInOneLine) {
     expectRefused("", withRheometer("torque.csv", "shear_rate_per_s,torque_nm\n1,2\n10,3\n"),
                   "torque.csv: rheometer: no column \"stress_pa\"");
     expectRefused("", withRheometer("zero.csv", "shear_rate_per_s,stress_pa\n1,2\n10,0\n"),
-                  "zero.csv:3: rheometer: shear rate and stress must be positive numbers, got 10, 0");
+                  "zero.csv: rheometer: row 2: shear rate and stress must be positive numbers, got 10, 0");
     expectRefused("", withRheometer("backwards.csv", "shear_rate_per_s,stress_pa\n10,2\n1,3\n"),
                   "backwards.csv:3: shear_rate_per_s goes backwards");
 }

@@ -205,7 +205,7 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
         why.push_back(joined(notAcrossRuns));
         addOnce(conclusion.whatWouldTell, {"the candidates fitted longer, or other candidates (--effects)"});
     }
-    if (!untestedAcrossRuns.empty()) {
+    if (!untestedAcrossRuns.empty() && !best) {
         why.push_back(joined(untestedAcrossRuns) + " predicted the held-out frames better but was not fitted to each "
                       "run alone, which would test it across the runs");
         moreTime(timeBudget, conclusion);

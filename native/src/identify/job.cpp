@@ -188,8 +188,6 @@ void requireFilmJob(Job& job, const nlohmann::json& doc, const std::string& orig
     job.resolutionCheck = false;
 }
 
-// {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
-// keys and its entry's, so that every check a single-run job gets applies to each run alike.
 // A rheometer's flow curve: at least two rows of positive shear rate and stress.
 std::vector<std::array<double, 2>> loadRheometer(const fs::path& file) {
     if (!fs::exists(file)) throw InputError(file.string() + ": rheometer: not found");
@@ -200,14 +198,16 @@ std::vector<std::array<double, 2>> loadRheometer(const fs::path& file) {
     std::vector<std::array<double, 2>> curve;
     for (size_t i = 0; i < csv.time.size(); ++i) {
         if (!(csv.time[i] > 0 && std::isfinite(csv.time[i]) && stresses[i] > 0 && std::isfinite(stresses[i])))
-            throw InputError(file.string() + ":" + std::to_string(i + 2) + ": rheometer: shear rate and stress must be "
-                             "positive numbers, got " + formatNumber(csv.time[i]) + ", " + formatNumber(stresses[i]));
+            throw InputError(file.string() + ": rheometer: row " + std::to_string(i + 1) + ": shear rate and stress "
+                             "must be positive numbers, got " + formatNumber(csv.time[i]) + ", " + formatNumber(stresses[i]));
         curve.push_back({csv.time[i], stresses[i]});
     }
     if (curve.size() < 2) throw InputError(file.string() + ": rheometer: needs at least two rows");
     return curve;
 }
 
+// {"runs": [{run keys}, ...], shared keys}: each run is parsed as a job of its own from the shared
+// keys and its entry's, so that every check a single-run job gets applies to each run alike.
 Job parseRuns(const nlohmann::json& doc, const std::string& origin, const fs::path& baseDir) {
     const nlohmann::json& runs = doc.at("runs");
     if (!runs.is_array() || runs.empty()) throw InputError(origin + ": runs: must be a non-empty array of runs");
