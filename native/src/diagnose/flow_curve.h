@@ -10,7 +10,7 @@
 namespace viscoscope::diagnose {
 
 // An RMS of log10 stress against the rheometer above this is warned of: the similarity-analysis
-// method fits these liquids' rheometer curves within 0.05–0.14 (Hamamichi et al. 2023, Table 2).
+// method of Hamamichi et al. 2023 fits its liquids' rheometer curves within 0.05–0.14 (issue 88).
 constexpr double kRheometerLogStressWarning = 0.15;
 
 // `fit` of `model` (its job: the law and parameters) as diagnosis.json's "flow_curve": the model,

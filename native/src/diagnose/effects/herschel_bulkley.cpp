@@ -1,7 +1,5 @@
 // Shear thinning with a yield stress: a Herschel–Bulkley liquid τ = τ_y + K γ̇ⁿ, n ≤ 1, in place of
-// η, for the liquids that are both (sauces, creams, lotions), where neither the power law nor the
-// Bingham liquid bends like the flow curve (tests/bench/FINDINGS.md, "Diagnose on the measured
-// ViRheometry dam breaks").
+// η, for the liquids that are both (sauces, creams, lotions).
 #include "diagnose/effects/effects.h"
 
 #include <cmath>
