@@ -86,6 +86,20 @@ double NoiseFloor::visibleShare() const {
     return -std::expm1(-boost::math::quantile(t, kGainConfidence) * std::sqrt(2.0) * logSpread());
 }
 
+namespace {
+
+// The share of the base's held-out E that `fit` gains.
+double relativeGain(const ModelFit& fit, const ModelFit& base) {
+    return base.heldOutE > 0 ? (base.heldOutE - fit.heldOutE) / base.heldOutE : 0.0;
+}
+
+}  // namespace
+
+bool contends(const Judged& candidate, const ModelFit& base, const NoiseFloor& noise) {
+    const double gain = relativeGain(*candidate.fit, base);
+    return gain > kHeldOutGain && gain > noise.visibleShare() && !candidate.vanishes;
+}
+
 std::optional<size_t> preferredFit(const std::vector<const ModelFit*>& fits, const std::vector<bool>& eligible) {
     std::vector<size_t> order;
     for (size_t c = 0; c < fits.size(); ++c)
@@ -139,24 +153,25 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
         const ModelFit& fit = *candidates[c].fit;
         CandidateVerdict& v = conclusion.candidates.emplace_back();
         v.gain = base.heldOutE - fit.heldOutE;
-        v.relativeGain = base.heldOutE > 0 ? v.gain / base.heldOutE : 0.0;
+        v.relativeGain = relativeGain(fit, base);
         v.aboveNoise = v.relativeGain > visible;
         if (baseCrossRunE && candidates[c].crossRunE && *baseCrossRunE > 0)
             v.crossRunGain = 1 - *candidates[c].crossRunE / *baseCrossRunE;
         const bool splitGain = v.relativeGain > kHeldOutGain && !candidates[c].vanishes;
+        const bool contender = contends(candidates[c], base, noise);  // splitGain, above the noise
         const bool acrossRuns = v.crossRunGain && *v.crossRunGain > std::max(kHeldOutGain, visible);
         const bool predictsBetter = splitGain && (baseCrossRunE ? acrossRuns : fit.bic < base.bic);
         v.earns = predictsBetter && v.aboveNoise;
         if (predictsBetter && !v.aboveNoise)
             withinScatter.push_back(candidates[c].effect->title + " predicts the held-out frames " + percent(v.relativeGain) +
                                     " better, within the scatter");
-        if (splitGain && v.aboveNoise && v.crossRunGain && !acrossRuns)
+        if (contender && v.crossRunGain && !acrossRuns)
             notAcrossRuns.push_back(candidates[c].effect->title + " predicts the held-out frames " + percent(v.relativeGain) +
                                     " better, but fitted to each run alone it predicts the other runs " +
                                     (*v.crossRunGain >= 0 ? percent(*v.crossRunGain) + " better" : percent(-*v.crossRunGain) + " worse") +
                                     " than the base does, under the " + percent(std::max(kHeldOutGain, visible)) +
                                     " a law of the liquid must carry across geometries");
-        if (splitGain && v.aboveNoise && baseCrossRunE && !v.crossRunGain) untestedAcrossRuns.push_back(candidates[c].effect->title);
+        if (contender && baseCrossRunE && !v.crossRunGain) untestedAcrossRuns.push_back(candidates[c].effect->title);
         if (!fit.searchCompleted()) cutShort.push_back(fit.model);
     }
     std::vector<const ModelFit*> fits;

@@ -59,6 +59,11 @@ struct Conclusion {
     std::optional<std::string> runsDisagreement;  // runsDisagree's sentence for the runs fitted alone
 };
 
+// Whether `candidate` predicts the held-out frames better than `base` by kHeldOutGain and by more
+// than `noise` explains, without having ended where its effect vanishes: what an effect must show
+// before its parameters are weighed (by BIC, or across the runs).
+bool contends(const Judged& candidate, const ModelFit& base, const NoiseFloor& noise);
+
 // Of the fits `eligible` says may be named, the one with the fewest parameters, unless one with more
 // predicts the held-out frames better by kHeldOutGain (the margin the base had to be beaten by: a
 // Herschel–Bulkley fit whose yield stress ends near its least is the power law); none when none is.

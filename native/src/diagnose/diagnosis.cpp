@@ -209,23 +209,25 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     FitCost cost = FitCost::of(diagnosis.base);
     // The model `name` (`model`: its job over every run, with `effect`'s law) fitted to each run alone
     // over its fitted frames, restarted at `theta` and scoring it as a known point, into
-    // fits/<name>_run<k>; each fit is scored on the other runs too (what it predicts of them). Their
-    // entries for diagnosis.json.
+    // fits/<name>_run<k>; each fit is scored on the other runs too (what it predicts of them).
+    struct RunsAlone {
+        std::vector<ModelFit> fits;
+        json entries = json::array();  // for diagnosis.json
+        double otherRunsE = 0;         // what the fits predict of the other runs, summed
+    };
     const auto fitEachRunAlone = [&](const std::string& name, const Job& model, const Effect* effect,
-                                     const std::vector<double>& theta, std::vector<ModelFit>& runFitsOut,
-                                     double& otherRunsE) {
+                                     const std::vector<double>& theta) {
         json parameters = json::array();
         for (size_t i = 0; i < model.parameters.size(); ++i) parameters.push_back(warmStart(model.parameters[i], theta[i]));
         const std::vector<Job> runs = runsOf(model);
-        json entries = json::array();
-        otherRunsE = 0;
+        RunsAlone alone;
         for (size_t r = 0; r < runs.size(); ++r) {
             const std::string folder = name + "_run" + std::to_string(r + 1);
             if (options.onFit) options.onFit(folder, step++, steps, parameterNames(model));
             IdentifyOptions identifyOptions = options.identify;
             identifyOptions.knownPoint = theta;
             json series;
-            ModelFit& fit = runFitsOut.emplace_back(
+            ModelFit& fit = alone.fits.emplace_back(
                 fitModel(name, runs[r],
                          screenedOnOnePlacement(modelJob(runs[r], effect, parameters, {fitCounts[r]})), {observations[r]},
                          {fitCounts[r]}, outDir / "fits" / folder, identifyOptions, budget.nextSearch(), series));
@@ -233,13 +235,13 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
             const double predicted = predictOtherRuns(model, observations, fitCounts, fit.theta, r);
             fit.scoringSeconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
             budget.spend(fit);
-            otherRunsE += predicted;
+            alone.otherRunsE += predicted;
             json entry = toJson(fit, series, folder);
             entry["run"] = r + 1;
             entry["other_runs_E"] = predicted;
-            entries.push_back(entry);
+            alone.entries.push_back(entry);
         }
-        return entries;
+        return alone;
     };
     // Each run alone, restarted at the base fit: about one base fit's least in all, each run holding
     // its share of the frames.
@@ -251,7 +253,10 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         steps -= runFits + crossRunFits;
         crossRunFits = 0;
     } else if (runFits > 0) {
-        runsDoc = fitEachRunAlone("base", job, nullptr, diagnosis.base.theta, diagnosis.runFits, baseCrossRunE.emplace());
+        RunsAlone alone = fitEachRunAlone("base", job, nullptr, diagnosis.base.theta);
+        diagnosis.runFits = std::move(alone.fits);
+        runsDoc = alone.entries;
+        baseCrossRunE = alone.otherRunsE;
     }
     const BaseFit baseFit{job, diagnosis.base.theta, diagnosis.base.shearRate};
     std::vector<Candidate> fitted(candidates.size());  // each candidate as it is fitted
@@ -402,15 +407,14 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     std::vector<json> crossRunDocs(diagnosis.candidates.size());
     json testedAcrossRuns;  // its name
     if (baseCrossRunE) {
-        // The one the conclusion would name of those that predict the held-out frames clearly better.
-        const double margin = std::max(kHeldOutGain, diagnosis.noise.visibleShare());
+        // The one the conclusion would name of those that contend.
         std::vector<const ModelFit*> fits;
-        std::vector<bool> gains;
+        std::vector<bool> contending;
         for (size_t c = 0; c < diagnosis.candidates.size(); ++c) {
             fits.push_back(&diagnosis.candidates[c]);
-            gains.push_back(fits.back()->heldOutE < (1 - margin) * base.heldOutE && !judged[c].vanishes);
+            contending.push_back(contends(judged[c], base, diagnosis.noise));
         }
-        std::optional<size_t> contender = preferredFit(fits, gains);
+        std::optional<size_t> contender = preferredFit(fits, contending);
         if (contender) {
             const ModelFit& fit = diagnosis.candidates[*contender];
             const double least = cost.leastFit(job, int(fit.theta.size()));
@@ -422,12 +426,10 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         }
         if (contender) {
             const size_t c = *contender;
-            std::vector<ModelFit> runFitsOfContender;
-            double crossRunE = 0;
-            const json perRun = fitEachRunAlone(diagnosis.candidates[c].model, models[c], candidates[c],
-                                                diagnosis.candidates[c].theta, runFitsOfContender, crossRunE);
-            judged[c].crossRunE = crossRunE;
-            crossRunDocs[c] = {{"E", crossRunE}, {"per_run", perRun}};
+            const RunsAlone alone =
+                fitEachRunAlone(diagnosis.candidates[c].model, models[c], candidates[c], diagnosis.candidates[c].theta);
+            judged[c].crossRunE = alone.otherRunsE;
+            crossRunDocs[c] = {{"E", alone.otherRunsE}, {"per_run", alone.entries}};
             testedAcrossRuns = diagnosis.candidates[c].model;
         } else {
             budget.forgo(crossRunFits);
