@@ -424,6 +424,44 @@ TEST_F(IdentifyLoop, StopsAtItsTimeBudget) {
     fs::remove_all(out);
 }
 
+// A simulation's E is rough, so tolerance_x comes late if at all: the search ends once two
+// generations running (one on each grid placement) each hold their median E within tolerance_fun of
+// their least, and a search that goes on without that rule finds its θ* within the first one's
+// interval: the generations it saved would not have changed the answer.
+TEST_F(IdentifyLoop, EndsOnceESettlesWhereMoreGenerationsChangeNothing) {
+    json doc = jobJson();
+    doc["max_generations"] = 30;
+    doc["tolerance_x"] = 1e-3;
+    identify::IdentifyOptions options;
+    options.writeFields = false;
+    const identify::IdentificationResult settled = identify::identify(job(doc), dir_ / "settled_out", options);
+    std::printf("[ identify ] settled: eta %.4f [%.4f, %.4f], stop %s after %d generations, %ld evaluations\n",
+                settled.theta[0], settled.interval[0][0], settled.interval[0][1], identify::toString(settled.stop),
+                settled.generations, settled.evaluations);
+    EXPECT_EQ(settled.stop, identify::StopReason::ToleranceFun);
+    EXPECT_LT(settled.generations, 30);
+    // The rule as result.json records it: the last two generations' own points.
+    for (int g = settled.generations - 1; g <= settled.generations; ++g) {
+        std::vector<double> E;
+        for (const json& e : settled.document.at("evaluated"))
+            if (e.at("generation").get<int>() == g && e.at("origin") != "known") E.push_back(e.at("E").get<double>());
+        ASSERT_FALSE(E.empty()) << "generation " << g;
+        std::sort(E.begin(), E.end());
+        EXPECT_LE(E[E.size() / 2], 1.05 * E.front()) << "generation " << g;
+    }
+    doc["tolerance_fun"] = 0;
+    doc["max_generations"] = settled.generations + 8;
+    const identify::IdentificationResult longer = identify::identify(job(doc), dir_ / "longer_out", options);
+    std::printf("[ identify ] without it: eta %.4f [%.4f, %.4f], stop %s after %d generations\n", longer.theta[0],
+                longer.interval[0][0], longer.interval[0][1], identify::toString(longer.stop), longer.generations);
+    EXPECT_NE(longer.stop, identify::StopReason::ToleranceFun);
+    EXPECT_GT(longer.evaluations, settled.evaluations);
+    EXPECT_GE(longer.theta[0], settled.interval[0][0]);
+    EXPECT_LE(longer.theta[0], settled.interval[0][1]);
+    fs::remove_all(dir_ / "settled_out");
+    fs::remove_all(dir_ / "longer_out");
+}
+
 // A measured track alone, like a lab's front positions, with no camera and no silhouettes: the
 // column's front along the ground, and its reach from the vertical through the middle of the wall it
 // leans on (the "radius" observable), sampled 60 times a second from the reference simulation (24

@@ -33,7 +33,10 @@
 //   * in one dimension each later full-fidelity generation scores, in place of a sample, the
 //     vertex of the parabola through the best full-fidelity evaluation and its neighbours (see
 //     parabolicProposal), clipped as an injected solution;
-//   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there.
+//   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there:
+//     tolerance_x on the search distribution's spread, tolerance_fun on a simulation's E (see
+//     settled), in one dimension only once the evaluations give a profile (the interval's, and the
+//     grid checks').
 //
 // θ*: the best full-fidelity evaluation. A parabola fitted to E (against 1/η; see fitProfile) over
 // the evaluations near it gives the interval; its vertex is reported (profile_fit.theta_min) but not
@@ -53,6 +56,7 @@
 #include "sim/sim.h"
 #include "surface/surface.h"
 
+#include <algorithm>
 #include <iomanip>
 #include <sstream>
 
@@ -168,6 +172,30 @@ void restartAlongScan(CmaEs& es, const std::vector<Eigen::VectorXd>& xs, int bes
     const Eigen::MatrixXd alongOnly = u * u.transpose();
     const Eigen::MatrixXd across = Eigen::MatrixXd::Identity(n, n) - alongOnly;
     es.restartWithCovariance(xs[best], along * along * (alongOnly + kAcrossScan * kAcrossScan * across));
+}
+
+// Generations that must each have settled (see settled) before a search stops on tolerance_fun:
+// with placements by generation, one on each placement, whose E differ by where the grid falls.
+int settledGenerations(const Job& job) { return std::max(2, placementsByGeneration(job) ? job.gridPlacements : 1); }
+
+// Has the search settled where E cannot rank its points any more? In each of the `count` generations
+// ending with `last`, the median E of the generation's own points (not an added known point) lies
+// within `share` of the least: the search distribution sits where E differs by less than that, and
+// more generations reshuffle points the comparison cannot tell apart. A simulation's E is rough and
+// rarely meets tolerance_x: its jitter between neighbouring θ (a grid, particles) keeps the ranking
+// random, and σ shrinks only slowly. The thin film's E is smooth, and along a valley (η against
+// the slip length) its points differ little yet rank truly: it ends on tolerance_x (FINDINGS, "Fits
+// that end on their own: tolerance_fun").
+bool settled(const std::vector<EvaluationRecord>& evaluated, int last, int count, double share) {
+    for (int g = last - count + 1; g <= last; ++g) {
+        std::vector<double> E;
+        for (const EvaluationRecord& e : evaluated)
+            if (e.generation == g && e.origin != "known") E.push_back(e.succeeded() ? e.E() : INFINITY);
+        if (E.empty()) return false;
+        std::sort(E.begin(), E.end());
+        if (!(E[E.size() / 2] <= (1 + share) * E.front())) return false;
+    }
+    return true;
 }
 
 }  // namespace
@@ -389,16 +417,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         }
         const int fineDone = done - state.coarseEnd;
         if (!coarse && fineDone >= job.fidelity.minFineGenerations) {
-            if (maxStd() < job.toleranceX) {
+            if (maxStd() < job.toleranceX)
                 state.stop = StopReason::ToleranceX;
-            } else if (fineDone >= 10) {
-                double lo = INFINITY, hi = -INFINITY;
-                for (auto it = state.generations.end() - 10; it != state.generations.end(); ++it) {
-                    lo = std::min(lo, it->generationBestE);
-                    hi = std::max(hi, it->generationBestE);
-                }
-                if (hi - lo < job.toleranceFun) state.stop = StopReason::ToleranceFun;
-            }
+            else if (job.forwardModel == ForwardModel::Simulation && fineDone >= settledGenerations(job) &&
+                     settled(state.evaluated, done, settledGenerations(job), job.toleranceFun) && (n > 1 || checksCanRun()))
+                state.stop = StopReason::ToleranceFun;
         }
         if (!state.stop && done >= job.maxGenerations) state.stop = StopReason::MaxGenerations;
         save();

@@ -121,7 +121,10 @@ struct Job {
     std::uint64_t seed = 1;
     int populationSize = 0;  // 0 = CMA-ES default
     double toleranceX = 1e-3;   // stop when every σ√C_ii (log space) < toleranceX (a relative step of toleranceX in θ)
-    double toleranceFun = 1e-9; // ... or when best E over the last 10 fine generations changes < this
+    // ... or, with the simulation as the forward model, when in the last full-fidelity generations
+    // (one per placement taken by generation, at least two) each generation's median E lies within
+    // this share of its least (see settled in identification.cpp).
+    double toleranceFun = 0.05;
     // Wall seconds for the whole identification (0 = none). The coarse phase ends by kCoarseBudgetShare
     // of it, and after the minimum fine generations no generation starts that is
     // predicted to end past it (from the mean time of the fine generations so far, with a margin).
