@@ -511,8 +511,12 @@ TEST_F(CliIdentify, ACheckpointOfAnotherJobIsRefusedAndMoreGenerationsContinue) 
                                 (dir_ / "out").string() + " --progress none --no-plots --no-fields");
     EXPECT_EQ(r.exitCode, 2);
     EXPECT_NE(r.err.find("checkpoint of a different job"), std::string::npos) << r.err;
-    // The same job with a higher max_generations continues the finished run.
-    const CommandResult more = run("identify " + writeJob(job(2), "more.json").string() + " --out " +
+    // The same job with a higher max_generations continues the finished run, with a rheometer's
+    // curve named too: it changes no E, only what the flow curve found is compared with.
+    std::ofstream(dir_ / "rheometer.csv") << "shear_rate_per_s,stress_pa\n1,10\n10,60\n";
+    json moreGenerations = job(2);
+    moreGenerations["rheometer"] = (dir_ / "rheometer.csv").string();
+    const CommandResult more = run("identify " + writeJob(moreGenerations, "more.json").string() + " --out " +
                                    (dir_ / "out").string() + " --progress none --no-plots --no-fields");
     EXPECT_EQ(more.exitCode, 0) << more.err;
     const json result = json::parse(slurp(dir_ / "out" / "result.json"));

@@ -28,9 +28,10 @@ Fidelity fidelityFromName(const json& name) {
 
 std::string fingerprintOf(const Job& job) {
     // A digest of the job document and the resolved inputs that change E.
-    // Settings that change neither E nor the CMA-ES state may differ between runs of one job.
+    // Settings that change neither E nor the CMA-ES state may differ between runs of one job (the
+    // rheometer's curve is only compared with the flow curve found).
     json doc = job.document;
-    for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun", "time_budget_s"}) doc.erase(key);
+    for (const char* key : {"max_generations", "tolerance_x", "tolerance_fun", "time_budget_s", "rheometer"}) doc.erase(key);
     doc["_scene"] = sceneToJson(job.scene);
     doc["_camera"] = cameraToJson(job.camera);
     doc["_reference"] = job.referenceDir.string();
