@@ -161,8 +161,10 @@ std::array<double, 2> percentiles(std::vector<double> values, double share) {
 // fits after the base are predicted from its cost, not measured.
 constexpr double kBudgetOverrun = 0.1;
 
-double FitBudget::nextSearch() const {
-    return total_ > 0 ? std::max(1e-3, (total_ - spent_) / std::max(1, fitsLeft_) - lastScoring_) : 0.0;
+double FitBudget::nextSearch(double shares) const {
+    if (total_ <= 0) return 0.0;
+    const double share = (total_ - spent_) * shares / std::max(shares, fitsLeft_ - 1 + shares);
+    return std::max(1e-3, share - lastScoring_);
 }
 
 bool FitBudget::holds(double seconds) const { return total_ <= 0 || spent_ + seconds <= (1 + kBudgetOverrun) * total_; }

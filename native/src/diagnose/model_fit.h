@@ -29,14 +29,15 @@ identify::Job modelJob(const identify::Job& base, const Effect* effect, const nl
 // A model's search over several parameters screens on one grid placement (fitModel scores it on all).
 identify::Job screenedOnOnePlacement(identify::Job job);
 
-// The diagnosis's time budget, spent fit by fit: each search gets an equal share of what is left,
-// less the scoring the fit before it took (the next one's scoring costs about as much).
+// The diagnosis's time budget, spent fit by fit: each search gets an equal share of what is left
+// (or `shares` of them, the other fits left one each), less the scoring the fit before it took (the
+// next one's scoring costs about as much).
 class FitBudget {
   public:
     FitBudget(double total, int fits) : total_(total), fitsLeft_(fits) {}
     // 0: no budget of the diagnosis's own (the job's time_budget_s stands). Never 0 otherwise, which
     // would mean none: an overspent budget still runs the minimum generations (and diagnose warns).
-    double nextSearch() const;
+    double nextSearch(double shares = 1) const;
     // Whether `seconds` more end within the budget, or no later than kBudgetOverrun past it (always
     // without a budget).
     bool holds(double seconds) const;
