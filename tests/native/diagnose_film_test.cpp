@@ -236,7 +236,7 @@ TEST(FilmDiagnosis, RefusesTheCandidatesABudgetCannotHoldAndSharesOneThatCan) {
     EXPECT_EQ(refused.at("grid").at("resolution"), identify::loadJob(dir / "job.json").resolution);
 
     // A budget well over the suggestion: the candidates are fitted, each within its share of what is
-    // left, the base within three.
+    // left, the base and its refit within three.
     options.timeBudget = 4 * suggested;
     const diagnose::Diagnosis d = diagnose::diagnose(identify::loadJob(dir / "job.json"), dir / "out_held", options);
     const json& doc = d.document;
@@ -249,7 +249,8 @@ TEST(FilmDiagnosis, RefusesTheCandidatesABudgetCannotHoldAndSharesOneThatCan) {
     double spent = 0, lastScoring = 0;
     for (size_t f = 0; f < fits.size(); ++f) {
         const json& fit = fits[f];
-        const double shares = f == 0 ? 3 : 1, left = planned - int(f);
+        const bool isBase = f == 0 || (!refit.is_null() && f + 1 == fits.size());
+        const double shares = isBase ? 3 : 1, left = planned - int(f);
         const double share =
             std::max(1e-3, (options.timeBudget - spent) * shares / std::max(shares, left - 1 + shares) - lastScoring);
         EXPECT_DOUBLE_EQ(fit.at("time_budget_s").get<double>(), share) << fit.at("model");

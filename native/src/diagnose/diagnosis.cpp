@@ -33,10 +33,11 @@ namespace {
 // "Diagnose on the measured particle-laden syrup dam break").
 constexpr double kVanishedLogDistance = 0.01;
 
-// The base fit may take this many fits' shares of the budget: every candidate is judged against it
-// and a base cut short lets none be named, while what it leaves unspent the other fits share. With
-// one share each, the lotion's base was cut short after 5–7 generations, where its E had just
-// settled (tests/bench/FINDINGS.md, "Fits that end on their own: tolerance_fun").
+// The base fit and its refit may each take this many fits' shares of the budget: every candidate is
+// judged against the base, and a base cut short lets none be named, while what it leaves unspent
+// the other fits share. With one share each, the lotion's base was cut short after 5–7
+// generations, where its E had just settled (tests/bench/FINDINGS.md, "Fits that end on their own:
+// tolerance_fun").
 constexpr double kBaseShares = 3;
 
 // A searched parameter of the base, restarted at the base fit within its own bounds.
@@ -378,7 +379,7 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
         identifyOptions.knownPoint = diagnosis.base.theta;
         json series;
         ModelFit refit = fitModel("base", job, modelJob(job, nullptr, parameters, fitCounts), observations, fitCounts,
-                                  outDir / "fits" / "base_refit", identifyOptions, budget.nextSearch(), series);
+                                  outDir / "fits" / "base_refit", identifyOptions, budget.nextSearch(kBaseShares), series);
         budget.spend(refit);
         const bool replaces = refit.fittedE < diagnosis.base.fittedE;
         if (replaces) {
