@@ -137,6 +137,18 @@ TEST_F(Conclusion, CannotTellWhileACandidateWasCutShort) {
     EXPECT_NE(c.sentence.find("shear_thinning"), std::string::npos) << c.sentence;
 }
 
+// Against a converged base, an effect that already predicts better stands though its own fit was cut
+// short; the conclusion says its parameters are not converged.
+TEST_F(Conclusion, NamesAnEffectWhoseOwnFitWasCutShortAndSaysSo) {
+    const diagnose::ModelFit base = fitOf("base", 0.10, -50);
+    const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70, identify::StopReason::TimeBudget)}, scatteredBy(1.01));
+    EXPECT_EQ(c.verdict, Verdict::MissingEffect) << c.sentence;
+    EXPECT_NE(c.sentence.find("its own fit was cut short (time_budget), so its parameters are not converged"),
+              std::string::npos) << c.sentence;
+    const auto converged = conclude(base, {fitOf("shear_thinning", 0.03, -70)}, scatteredBy(1.01));
+    EXPECT_EQ(converged.sentence.find("cut short"), std::string::npos) << converged.sentence;
+}
+
 TEST_F(Conclusion, NamesNoEffectThatEndedAsTheBase) {
     const diagnose::ModelFit base = fitOf("base", 0.10, -50);
     const auto c = conclude(base, {fitOf("shear_thinning", 0.03, -70)}, scatteredBy(1.01), {true});

@@ -191,6 +191,11 @@ Conclusion conclude(const Job& job, double timeBudget, const ModelFit& base, con
                               "): it predicts the held-out frames " + percent(v.relativeGain) + " better than the base fit" +
                               (v.crossRunGain ? ", and fitted to each run alone the other runs " + percent(*v.crossRunGain) + " better," : "") +
                               " and " + scatter;
+        // It stands against a converged base even when its own fit was cut short (already it predicts
+        // better), but its parameters are where the search stopped.
+        if (!named.fit->searchCompleted())
+            conclusion.sentence += "; its own fit was cut short (" + std::string(toString(*named.fit->stop)) +
+                                   "), so its parameters are not converged";
         return conclusion;
     }
     std::vector<std::string> why;

@@ -486,6 +486,11 @@ Diagnosis diagnose(const Job& jobIn, const fs::path& outDir, const DiagnoseOptio
     json notTried = json::array();
     for (const auto& [effect, why] : refused) notTried.push_back({{"effect", effect}, {"why", why}});
     const ModelFit& after = diagnosis.chosen ? diagnosis.candidates[*diagnosis.chosen] : base;
+    // Said in the progress lines too (the conclusion's sentence says it).
+    if (diagnosis.chosen && !after.searchCompleted())
+        warn("diagnose: the fit of the effect named, " + after.model + ", was cut short (" + toString(*after.stop) +
+             ") after " + std::to_string(after.evaluations) + " evaluations: the effect stands, but its parameters "
+             "and flow curve are not converged (a larger --time-budget, or fewer --effects)");
     const json curve = flowCurve(after, diagnosis.chosen ? models[*diagnosis.chosen] : job);
     if (curve.contains("rheometer") && curve.at("rheometer").at("log_stress_rms").is_number()) {
         const double rms = curve.at("rheometer").at("log_stress_rms").get<double>();
