@@ -134,8 +134,9 @@ def test_diagnose_a_newtonian_track_cancel_resume_and_no_missing_effect(ctx, tmp
     diagnosis = json.load(open(os.path.join(out_dir, "diagnosis.json")))
     # The panel's budget is the whole diagnosis's, shared by its fits.
     assert diagnosis["time_budget_s"] == pytest.approx(60 * vs.diagnosis_budget_minutes)
-    # The base's share of the planned fits: itself and four candidates (side walls are not tried).
-    assert diagnosis["base"]["time_budget_s"] == pytest.approx(60 * vs.diagnosis_budget_minutes / 5)
+    # The base's share of the planned fits: itself, with three shares, and four candidates with one
+    # each (side walls are not tried).
+    assert diagnosis["base"]["time_budget_s"] == pytest.approx(60 * vs.diagnosis_budget_minutes * 3 / (3 + 4))
     for candidate in diagnosis["candidates"]:
         limit = (1 + 1e-9 if candidate["model"] == "shear_thinning" else 1.02) * diagnosis["base"]["fitted_E"]
         assert candidate["fitted_E"] <= limit, candidate["model"]
