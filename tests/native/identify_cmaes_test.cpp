@@ -3,6 +3,7 @@
 // seed while a broken rank-one/rank-μ update, step-size rule or weight vector does not.
 #include "identify/identify.h"
 
+#include <Eigen/LU>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -294,4 +295,70 @@ TEST(ProfileFit, JitterEstimatesTheNoiseInEFromFivePoints) {
     std::printf("mean jitter² / noise variance over %d draws of five points: %.3f\n", fits, ratio);
     // The mean of χ²₂/2 over 4000 draws: 1 ± 0.016 (one standard deviation).
     EXPECT_NEAR(ratio, 1.0, 0.06);
+}
+
+// The joint profile of two parameters, from noisy samples of a tilted bowl E = E0 + ½ (x − x0)ᵀ H (x − x0)
+// in x = ln θ: each interval is the bowl's projection where it rises ΔE = 2 σ above its floor,
+// x0_i ± √(2 ΔE (H⁻¹)_ii), which the search's own distribution does not give.
+TEST(JointProfileFit, ABowlsIntervalsAreItsProjectionAtTwiceTheNoise) {
+    using viscoscope::identify::fitJointProfile;
+    constexpr double kNoise = 0.0005, kFloor = 0.02;
+    const Eigen::Vector2d x0(std::log(2.0), std::log(0.6));
+    Eigen::Matrix2d H;
+    H << 0.4, 0.3, 0.3, 0.5;
+    std::mt19937 random(11);
+    std::normal_distribution<double> noise(0, kNoise);
+    std::uniform_real_distribution<double> offset(-0.45, 0.45);
+    std::vector<std::pair<std::vector<double>, double>> points;
+    for (int k = 0; k < 60; ++k) {
+        const Eigen::Vector2d x = x0 + Eigen::Vector2d(offset(random), offset(random));
+        points.push_back({{std::exp(x[0]), std::exp(x[1])}, kFloor + 0.5 * (x - x0).dot(H * (x - x0)) + noise(random)});
+    }
+    nlohmann::json info;
+    const auto fit = fitJointProfile(points, {2.1, 0.62}, 0.5, info);
+    ASSERT_TRUE(fit.has_value());
+    ASSERT_TRUE(fit->bounded) << info.dump();
+    const Eigen::Matrix2d covariance = H.inverse();
+    for (int i = 0; i < 2; ++i) {
+        const double expectedHalf = std::sqrt(2 * 2 * kNoise * covariance(i, i));
+        const double half = 0.5 * std::log(fit->interval[i][1] / fit->interval[i][0]);
+        const double centre = 0.5 * std::log(fit->interval[i][1] * fit->interval[i][0]);
+        std::printf("parameter %d: half-width %.4f (bowl at 2σ: %.4f), centre %+.4f off\n", i, half, expectedHalf,
+                    centre - x0[i]);
+        // At least the bowl's projection; wider only by the noisy points near its rim.
+        EXPECT_GE(half / expectedHalf, 0.85);
+        EXPECT_LE(half / expectedHalf, 1.3);
+        EXPECT_NEAR(centre, x0[i], 0.25 * expectedHalf);
+    }
+}
+
+// Along a ridge E does not change (a power law's K and n where one flow fixes only K γ̇ⁿ⁻¹): in
+// ln θ the ridge is curved, and a quadric fitted there finds a minimum with an interval far
+// narrower than the ridge; each interval must span the ridge's evaluations instead.
+TEST(JointProfileFit, ACurvedRidgesIntervalsSpanIt) {
+    using viscoscope::identify::fitJointProfile;
+    constexpr double kNoise = 0.0005, kFloor = 0.02, kShearRate = 30;
+    std::mt19937 random(12);
+    std::normal_distribution<double> noise(0, kNoise);
+    std::uniform_real_distribution<double> along(std::log(0.5), std::log(1.0)), across(-0.3, 0.3);
+    std::vector<std::pair<std::vector<double>, double>> points;
+    double lowestIndex = 1, highestIndex = 0;
+    for (int k = 0; k < 60; ++k) {
+        // ln K = ln η + (1 − n) ln γ̇ on the ridge through η = 1 Pa·s at γ̇.
+        const double lnN = along(random), offRidge = across(random);
+        const double lnK = (1 - std::exp(lnN)) * std::log(kShearRate) + offRidge;
+        points.push_back({{std::exp(lnK), std::exp(lnN)}, kFloor + 0.5 * offRidge * offRidge + noise(random)});
+        if (std::abs(offRidge) < 0.02) {
+            lowestIndex = std::min(lowestIndex, std::exp(lnN));
+            highestIndex = std::max(highestIndex, std::exp(lnN));
+        }
+    }
+    nlohmann::json info;
+    const auto best = std::min_element(points.begin(), points.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+    const auto fit = fitJointProfile(points, best->first, 0.5, info);
+    ASSERT_TRUE(fit.has_value());
+    std::printf("flow index: interval [%.3f, %.3f]; the ridge's points within 0.02 of it span [%.3f, %.3f]\n",
+                fit->interval[1][0], fit->interval[1][1], lowestIndex, highestIndex);
+    EXPECT_LE(fit->interval[1][0], lowestIndex);
+    EXPECT_GE(fit->interval[1][1], highestIndex);
 }

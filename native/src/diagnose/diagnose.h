@@ -54,6 +54,7 @@ struct ModelFit {
     std::vector<std::string> parameters;
     std::vector<double> theta;
     std::vector<std::array<double, 2>> interval;
+    std::vector<std::vector<double>> indistinguishable;  // several parameters: identify's, for the flow curve's band
     double fittedE = 0;    // the fitted frames' E, every run
     double heldOutE = 0;   // the held-out frames' E: the prediction's error
     double wholeE = 0;     // all frames

@@ -41,23 +41,28 @@ json flowCurve(const ModelFit& fit, const Job& model) {
     const auto [low, high] = *fit.shearRateRange;
     const auto stress = [](const Material& material, double rate) { return rate * sim::apparentViscosity(material, rate); };
     const Material best = sceneWithParameters(model, fit.theta, model.resolution).material;
-    // Every corner of the intervals' box: 2^k materials for k parameters.
-    std::vector<Material> corners;
+    // The band's materials: with several parameters, every evaluation E cannot tell from θ*, since
+    // the corners of the intervals' box lie off the ridge along which such parameters trade off (a
+    // power law's high K with its high n); else every corner of that box, 2^k materials for k.
+    std::vector<Material> band;
+    for (const std::vector<double>& theta : fit.indistinguishable)
+        band.push_back(sceneWithParameters(model, theta, model.resolution).material);
     const size_t k = fit.theta.size();
-    for (size_t mask = 0; k > 0 && fit.interval.size() == k && mask < (size_t(1) << k); ++mask) {
+    const bool corners = band.empty();
+    for (size_t mask = 0; corners && k > 0 && fit.interval.size() == k && mask < (size_t(1) << k); ++mask) {
         std::vector<double> corner = fit.theta;
         for (size_t i = 0; i < k; ++i) corner[i] = fit.interval[i][(mask >> i) & 1];
-        corners.push_back(sceneWithParameters(model, corner, model.resolution).material);
+        band.push_back(sceneWithParameters(model, corner, model.resolution).material);
     }
     json points = json::array();
     for (double rate : logSpaced(low, high, kCurvePoints)) {
         json point{{"shear_rate_per_s", rate}, {"stress_pa", stress(best, rate)},
                    {"viscosity_pa_s", sim::apparentViscosity(best, rate)}};
-        if (!corners.empty()) {
+        if (!band.empty()) {
             double least = INFINITY, greatest = -INFINITY;
-            for (const Material& corner : corners) {
-                least = std::min(least, stress(corner, rate));
-                greatest = std::max(greatest, stress(corner, rate));
+            for (const Material& material : band) {
+                least = std::min(least, stress(material, rate));
+                greatest = std::max(greatest, stress(material, rate));
             }
             point["stress_band_pa"] = {least, greatest};
         }

@@ -1,5 +1,5 @@
 // The diagnosis's answer as a rheologist reads it: the fitted law's flow curve τ(γ̇) over the shear
-// rates its flow exercised, with the band of its parameters' intervals, and against the job's
+// rates its flow exercised, with the band of what its fit cannot tell apart, and against the job's
 // rheometer where it names one. Private to the stage.
 #pragma once
 
@@ -14,8 +14,8 @@ namespace viscoscope::diagnose {
 constexpr double kRheometerLogStressWarning = 0.15;
 
 // `fit` of `model` (its job: the law and parameters) as diagnosis.json's "flow_curve": the model,
-// the shear-rate range, points of γ̇, τ, η and τ's band (the least and greatest over the corners of
-// the parameters' intervals), and with `model.rheometer` the RMS of log10 τ against it over the
+// the shear-rate range, points of γ̇, τ, η and τ's band (the least and greatest over the evaluations
+// E cannot tell from θ*, or else over the corners of the parameters' intervals), and with `model.rheometer` the RMS of log10 τ against it over the
 // range both cover. Null when the fit's flow has no shear-rate range (the thin film).
 nlohmann::json flowCurve(const ModelFit& fit, const identify::Job& model);
 

@@ -191,6 +191,7 @@ ModelFit fitModel(const std::string& model, const Job& full, Job fitting, const 
         const IdentificationResult result = identify::identify(fitting, dir, identifyOptions);
         fit.theta = result.theta;
         fit.interval = result.interval;
+        fit.indistinguishable = result.indistinguishable;
         fit.evaluations = result.evaluations;
         fit.seconds = result.seconds;
         fit.stop = result.stop;

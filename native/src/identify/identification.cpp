@@ -70,6 +70,7 @@ const char* toString(StopReason reason) {
         case StopReason::MaxGenerations: return "max_generations";
         case StopReason::ToleranceX: return "tolerance_x";
         case StopReason::ToleranceFun: return "tolerance_fun";
+        case StopReason::Resolved: return "resolved";
         case StopReason::TimeBudget: return "time_budget";
         case StopReason::Cancelled: return "cancelled";
     }
@@ -194,6 +195,36 @@ bool settled(const std::vector<EvaluationRecord>& evaluated, int last, int count
         if (E.empty()) return false;
         std::sort(E.begin(), E.end());
         if (!(E[E.size() / 2] <= (1 + share) * E.front())) return false;
+    }
+    return true;
+}
+
+// Has a search of several parameters come down to what E can resolve? In each of the `count` full-
+// fidelity generations ending with `last`, its distribution's band exp(m ± 2σ√C_ii) (within the
+// bounds) lies, for every parameter, inside the joint profile's interval over the evaluations up to
+// that generation: it samples only θ the comparison cannot tell from the best, and more generations
+// wander among them. tolerance_fun's medians need the distribution narrower than E's valley across
+// a ridge, which a power law's K and n never reached on the ViRheometry fronts (FINDINGS, "Several
+// parameters: the joint profile").
+bool resolved(const std::vector<GenerationRecord>& generations, const std::vector<EvaluationRecord>& evaluated,
+              const LogSearchSpace& bounds, int last, int count) {
+    for (int g = last - count + 1; g <= last; ++g) {
+        const auto record = std::find_if(generations.begin(), generations.end(),
+                                         [&](const GenerationRecord& r) { return r.generation == g; });
+        if (record == generations.end() || record->fidelity != Fidelity::Full) return false;
+        std::vector<EvaluationRecord> upTo;
+        for (const EvaluationRecord& e : evaluated)
+            if (e.generation <= g) upTo.push_back(e);
+        if (record->bestTheta.empty()) return false;
+        json unused;
+        const std::optional<JointProfileFit> joint = jointProfileNear(upTo, record->bestTheta, unused);
+        if (!joint) return false;
+        for (size_t i = 0; i < joint->interval.size(); ++i) {
+            const double m = std::log(record->meanTheta[i]), reach = 2 * record->logStd[i];
+            const double low = std::exp(std::max(m - reach, bounds.lower[i]));
+            const double high = std::exp(std::min(m + reach, bounds.upper[i]));
+            if (low < joint->interval[i][0] || high > joint->interval[i][1]) return false;
+        }
     }
     return true;
 }
@@ -422,6 +453,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             else if (job.forwardModel == ForwardModel::Simulation && fineDone >= settledGenerations(job) &&
                      settled(state.evaluated, done, settledGenerations(job), job.toleranceFun) && (n > 1 || checksCanRun()))
                 state.stop = StopReason::ToleranceFun;
+            else if (job.forwardModel == ForwardModel::Simulation && n > 1 && fineDone >= settledGenerations(job) &&
+                     resolved(state.generations, state.evaluated, bounds, done, settledGenerations(job)))
+                state.stop = StopReason::Resolved;
         }
         if (!state.stop && done >= job.maxGenerations) state.stop = StopReason::MaxGenerations;
         save();
@@ -449,9 +483,21 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
     if (!best) best = bestAt(job, state.evaluated, Fidelity::Coarse);
     if (!best) throw std::runtime_error("no successful evaluation");
+    json jointProfileInfo;
+    const std::optional<JointProfileFit> joint =
+        n > 1 ? jointProfileNear(state.evaluated, best->theta, jointProfileInfo) : std::nullopt;
+    if (joint && !joint->bounded) {
+        std::string names;
+        for (const ParameterSpec& p : job.parameters) names += (names.empty() ? "" : ", ") + p.name();
+        const std::string line = names + ": E has no minimum along some line among the evaluations near θ*: the "
+                                         "parameters trade off along a ridge the data do not resolve, and each "
+                                         "interval spans the evaluations E cannot tell from the best";
+        warn(line);
+        doubts.push_back(line);
+    }
     std::vector<ParameterEstimate> estimates;
     for (int i = 0; i < n; ++i) {
-        ParameterEstimate estimate = estimateParameter(job, bounds, es, state.evaluated, i, best->theta[i]);
+        ParameterEstimate estimate = estimateParameter(job, bounds, es, state.evaluated, i, best->theta[i], joint);
         if (gridCheckPlanned(job, GridCheck::Alignment))
             estimate.alignment =
                 alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, budget, save);
@@ -476,6 +522,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     result.E = best->E;
     for (const ParameterEstimate& estimate : estimates) result.interval.push_back(estimate.interval);
     result.intervalMethod = intervalMethodName(estimates.front());
+    if (joint) result.indistinguishable = joint->indistinguishable;
     result.seconds = budget.elapsed();
 
     for (const GenerationRecord& g : state.generations)
@@ -486,6 +533,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     }
     warnings.insert(warnings.end(), doubts.begin(), doubts.end());
     result.document = resultDocument(job, result, state, plan, obs, estimates, *best, warnings, doubts);
+    if (!jointProfileInfo.is_null()) result.document["joint_profile"] = jointProfileInfo;
     if (writeFields) result.document["fields"] = fields.keep(job, obs, *best, plan.fullResolution);
     writeEvaluationsCsv(job, state.evaluated, outDir / "evaluations.csv");
     writeJsonAtomically(result.document, outDir / "result.json");

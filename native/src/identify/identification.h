@@ -29,13 +29,15 @@ struct GenerationReport {
     bool resumed = false;
 };
 
-enum class StopReason { MaxGenerations, ToleranceX, ToleranceFun, TimeBudget, Cancelled };
+enum class StopReason { MaxGenerations, ToleranceX, ToleranceFun, Resolved, TimeBudget, Cancelled };
 const char* toString(StopReason reason);
 
 struct IdentificationResult {
     std::vector<double> theta;
     std::vector<std::array<double, 2>> interval;
     std::string intervalMethod;
+    // Several parameters: the evaluations' θ that E cannot tell from θ* (JointProfileFit).
+    std::vector<std::vector<double>> indistinguishable;
     double E = 0;  // of θ*, the best full-fidelity evaluation
     StopReason stop = StopReason::MaxGenerations;
     int generations = 0;

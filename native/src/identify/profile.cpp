@@ -2,6 +2,8 @@
 #include "identify/profile.h"
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <Eigen/QR>
 
 #include <algorithm>
@@ -62,6 +64,86 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
     fit.interval = inverse ? std::array<double, 2>{theta(hi), lo > 0 ? theta(lo) : INFINITY}
                            : std::array<double, 2>{theta(lo), theta(hi)};
     info["theta_min"] = fit.vertex;
+    return fit;
+}
+
+std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::vector<double>, double>>& points,
+                                               const std::vector<double>& thetaBest, double range, json& info) {
+    const int d = static_cast<int>(thetaBest.size());
+    const int coefficients = (d + 1) * (d + 2) / 2;
+    // x relative to the best, so that the constant term is E there and the fit well conditioned.
+    std::vector<Eigen::VectorXd> near;
+    std::vector<double> E;
+    for (const auto& [theta, e] : points) {
+        if (!std::isfinite(e) || theta.size() != thetaBest.size()) continue;
+        Eigen::VectorXd x(d);
+        for (int i = 0; i < d; ++i) x[i] = std::log(theta[i] / thetaBest[i]);
+        if (x.cwiseAbs().maxCoeff() > range) continue;
+        near.push_back(x);
+        E.push_back(e);
+    }
+    const int m = static_cast<int>(near.size());
+    info["points"] = m;
+    info["variable"] = "ln θ";
+    if (m < 2 * coefficients) return std::nullopt;
+    // Columns 1, x_i, then ½x_i² and x_i x_j (i < j), so that the coefficients are E, g and H.
+    Eigen::MatrixXd A(m, coefficients);
+    Eigen::VectorXd y(m);
+    for (int r = 0; r < m; ++r) {
+        const Eigen::VectorXd& x = near[r];
+        int c = 0;
+        A(r, c++) = 1;
+        for (int i = 0; i < d; ++i) A(r, c++) = x[i];
+        for (int i = 0; i < d; ++i)
+            for (int j = i; j < d; ++j) A(r, c++) = i == j ? 0.5 * x[i] * x[i] : x[i] * x[j];
+        y[r] = E[r];
+    }
+    const Eigen::VectorXd coef = A.colPivHouseholderQr().solve(y);
+    const Eigen::VectorXd fitted = A * coef;
+    const double jitter = std::sqrt((fitted - y).squaredNorm() / (m - coefficients));
+    const Eigen::VectorXd g = coef.segment(1, d);
+    Eigen::MatrixXd H(d, d);
+    for (int i = 0, c = 1 + d; i < d; ++i)
+        for (int j = i; j < d; ++j) H(i, j) = H(j, i) = coef[c++];
+    const Eigen::VectorXd curvatures = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(H).eigenvalues();
+    Eigen::VectorXd lowest = near.front(), highest = near.front();
+    for (const Eigen::VectorXd& x : near) lowest = lowest.cwiseMin(x), highest = highest.cwiseMax(x);
+    std::optional<Eigen::VectorXd> vertex;
+    if (curvatures.minCoeff() > 0) {
+        const Eigen::VectorXd v = H.ldlt().solve(-g);
+        if ((v.array() >= lowest.array()).all() && (v.array() <= highest.array()).all()) vertex = v;
+    }
+    JointProfileFit fit;
+    fit.jitter = jitter;
+    const double least = vertex ? coef[0] + 0.5 * g.dot(*vertex) : fitted.minCoeff();
+    fit.deltaE = std::max(2 * jitter, 0.01 * std::abs(least));
+    // Every point E cannot tell from the least, also beyond `range` (a ridge runs on past it): the
+    // quadric alone would leave out a curved valley's far points, whose misfit it reads as jitter.
+    fit.interval.assign(d, {INFINITY, 0});
+    const auto include = [&](int i, double theta) {
+        fit.interval[i] = {std::min(fit.interval[i][0], theta), std::max(fit.interval[i][1], theta)};
+    };
+    for (const auto& [at, e] : points)
+        if (at.size() == thetaBest.size() && e <= least + fit.deltaE) {
+            for (int i = 0; i < d; ++i) include(i, at[i]);
+            fit.indistinguishable.push_back(at);
+        }
+    if (vertex) {
+        const Eigen::MatrixXd covariance = H.inverse();
+        for (int i = 0; i < d; ++i) {
+            const double half = std::sqrt(2 * fit.deltaE * covariance(i, i));
+            include(i, thetaBest[i] * std::exp((*vertex)[i] - half));
+            include(i, thetaBest[i] * std::exp((*vertex)[i] + half));
+            fit.vertex.push_back(thetaBest[i] * std::exp((*vertex)[i]));
+        }
+        fit.bounded = true;
+    }
+    for (int i = 0; i < d; ++i) include(i, thetaBest[i]);
+    info["jitter"] = jitter;
+    info["delta_E"] = fit.deltaE;
+    info["curvatures"] = std::vector<double>(curvatures.data(), curvatures.data() + d);
+    info["bounded"] = fit.bounded;
+    if (fit.bounded) info["theta_min"] = fit.vertex;
     return fit;
 }
 

@@ -22,6 +22,8 @@ constexpr double kOutOfViewDoubtShare = 0.05;
 // span at least kFlatSpan in some parameter: the footage does not tell those θ apart.
 constexpr double kFlatObjectiveShare = 0.05;
 constexpr double kFlatSpan = 2.0;
+// The profiles fit E over the evaluations within this of the best in ln θ (every ln θ_i).
+constexpr double kProfileRange = 0.5;
 
 }  // namespace
 
@@ -121,7 +123,8 @@ json timingsOf(const std::vector<EvaluationRecord>& evaluated, double wallSecond
 }
 
 ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
-                                    const std::vector<EvaluationRecord>& evaluated, int i, double value) {
+                                    const std::vector<EvaluationRecord>& evaluated, int i, double value,
+                                    const std::optional<JointProfileFit>& joint) {
     const Eigen::VectorXd sd = es.standardDeviations();
     const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
     ParameterEstimate estimate;
@@ -137,13 +140,22 @@ ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds
         estimate.profile = profileNear(job, evaluated, value, info);
         estimate.profileFit = info;
     }
+    if (joint) estimate.jointProfile = joint->interval[i];
     return estimate;
+}
+
+std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated,
+                                                const std::vector<double>& best, json& info) {
+    std::vector<std::pair<std::vector<double>, double>> points;
+    for (const EvaluationRecord& e : evaluated)
+        if (e.fidelity == Fidelity::Full && e.succeeded()) points.emplace_back(e.theta(), e.E());
+    return fitJointProfile(points, best, kProfileRange, info);
 }
 
 std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
                                       json& info) {
     std::optional<ProfileFit> profile =
-        fitProfile(fullFidelityProfile(job, evaluated), value, 0.5, job.parameters[0].profileInInverse(), info);
+        fitProfile(fullFidelityProfile(job, evaluated), value, kProfileRange, job.parameters[0].profileInInverse(), info);
     // A vertex beyond the fitted points is an extrapolation, and so is its band
     // (tests/bench/FINDINGS.md, "The profile interval").
     if (profile && !profile->vertexAmongPoints) profile.reset();
@@ -153,7 +165,9 @@ std::optional<ProfileFit> profileNear(const Job& job, const std::vector<Evaluati
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i) {
     const double lower = std::exp(bounds.lower[i]), upper = std::exp(bounds.upper[i]);
     const double value = estimate.value;
-    std::array<double, 2> band = estimate.profile ? estimate.profile->interval : estimate.cma;
+    std::array<double, 2> band = estimate.profile        ? estimate.profile->interval
+                                 : estimate.jointProfile ? *estimate.jointProfile
+                                                         : estimate.cma;
     for (const std::optional<GridCheckOutcome>* check : {&estimate.alignment, &estimate.resolution})
         if (estimate.widenedBy(*check)) {
             const double reach = *(*check)->widening;
@@ -166,7 +180,7 @@ void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, i
 }
 
 std::string intervalMethodName(const ParameterEstimate& estimate) {
-    return std::string(estimate.profile ? "profile" : "cma") + (estimate.widenedBy(estimate.alignment) ? "+alignment" : "") +
+    return std::string(estimate.profile ? "profile" : estimate.jointProfile ? "joint_profile" : "cma") + (estimate.widenedBy(estimate.alignment) ? "+alignment" : "") +
            (estimate.widenedBy(estimate.resolution) ? "+resolution" : "");
 }
 
@@ -193,7 +207,12 @@ json parameterEntry(const Job& job, const LogSearchSpace& bounds, const Paramete
                                             "over full-fidelity evaluations within ±0.5 in ln θ of the best "
                                             "one, band where it is within ΔE = max(2·jitter, 1 % E_min) "
                                             "of its minimum"
-                                          : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
+                       : estimate.jointProfile
+                           ? "joint profile: quadric fit of E in ln θ over full-fidelity evaluations within ±0.5 "
+                             "of the best one in every ln θ_i, band where its least over the other parameters is "
+                             "within ΔE = max(2·jitter, 1 % E_min) of its minimum; where it has none (a ridge), "
+                             "the span of the evaluations within ΔE of its least (joint_profile)"
+                           : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
     if (estimate.widenedBy(estimate.alignment))
         method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
                   "and y by half a cell, or half the spacing of the grid placements (alignment_check)";

@@ -155,7 +155,7 @@ std::optional<SearchState> Checkpoint::load(const Job& job) const {
                                   a.at("errors").get<std::vector<std::string>>()};
     if (const json& s = cp.at("stop"); !s.is_null()) {
         for (StopReason r : {StopReason::MaxGenerations, StopReason::ToleranceX, StopReason::ToleranceFun,
-                             StopReason::TimeBudget})
+                             StopReason::Resolved, StopReason::TimeBudget})
             if (s == toString(r)) state.stop = r;
         // A finished run continues when max_generations or the time budget was raised.
         if (state.stop == StopReason::MaxGenerations && state.es.generation() < job.maxGenerations) state.stop.reset();

@@ -231,22 +231,29 @@ struct ParameterEstimate {
     std::array<double, 2> cma{};               // exp(m ± 2σ√C_ii), within the bounds
     std::optional<nlohmann::json> profileFit;  // fitProfile's account, one-parameter searches only
     std::optional<ProfileFit> profile;         // kept when its vertex lies among the fitted points
+    std::optional<std::array<double, 2>> jointProfile;  // searches of several parameters: jointProfileNear's
     std::optional<GridCheckOutcome> alignment, resolution;
     std::array<double, 2> interval{};  // settleInterval's
     bool widenedBy(const std::optional<GridCheckOutcome>& check) const { return check && check->widening; }
 };
 // Parameter i's estimate at θ* = `value` before the grid checks: the CMA band from the final
-// distribution and, in one dimension, the profile fit over the full-fidelity evaluations.
+// distribution and, in one dimension, the profile fit over the full-fidelity evaluations; in
+// several, the joint profile's interval (`joint`, jointProfileNear's).
 ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds, const CmaEs& es,
-                                    const std::vector<EvaluationRecord>& evaluated, int i, double value);
+                                    const std::vector<EvaluationRecord>& evaluated, int i, double value,
+                                    const std::optional<JointProfileFit>& joint);
+// The joint profile (fitJointProfile) of a search of several parameters over its successful
+// full-fidelity evaluations around θ* = `best`; `info` receives its account.
+std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated,
+                                                const std::vector<double>& best, nlohmann::json& info);
 // The profile fit of a one-parameter search's full-fidelity evaluations around θ* = `value`, kept
 // when its vertex lies among the fitted points; `info` receives fitProfile's account.
 std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
                                       nlohmann::json& info);
-// The interval reported: the profile band when there is one, else the CMA band, widened by each grid
+// The interval reported: the profile band (or the joint profile's) when there is one, else the CMA band, widened by each grid
 // check's reach, made to contain θ*, and clipped into the bounds.
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);
-// "profile" or "cma", "+alignment" and "+resolution" for the checks that changed it:
+// "profile", "joint_profile" or "cma", "+alignment" and "+resolution" for the checks that changed it:
 // IdentificationResult::intervalMethod.
 std::string intervalMethodName(const ParameterEstimate& estimate);
 
