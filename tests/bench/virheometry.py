@@ -17,9 +17,13 @@ For each liquid:
    `--time-budget` seconds: the conclusion, each run's own Newtonian η, each model's parameters and
    held-out E, and the chosen law's flow curve against the rheometer's over the shear rates the
    simulation exercised (log10 of stress, RMS: ViRheometry's own are 0.05–0.14).
+   Or, with `--power-law`, `viscoscope identify` of a power law's K and n on both runs' every frame
+   (from K 2.5 Pa·sⁿ, n 0.75), to the end of `--generations` or `--time-budget`: its K and n with
+   their intervals, why it stopped, and its flow curve against the rheometer's over `--rates` (else
+   the range a diagnosis in the same `--work` folder measured for its power law, else 1–100 s⁻¹).
 
     /usr/bin/python3 tests/bench/virheometry.py [--liquid sauce|lotion|both] [--resolution 48]
-        [--time-budget 1800] [--threads 2] [--effects a,b] [--work DIR]
+        [--time-budget 1800] [--threads 2] [--effects a,b] [--power-law [--rates LOW HIGH]] [--work DIR]
 """
 import argparse
 import json
@@ -102,6 +106,9 @@ def run_liquid(args, name):
            "parameters": [{"name": "viscosity", "initial": 2, "spread": 2, "min": 0.05, "max": 200}],
            "resolution": args.resolution, "max_generations": args.generations, "seed": 5}
     (work / "job.json").write_text(json.dumps(job, indent=1))
+    if args.power_law:
+        identify_power_law(args, name, work, job)
+        return
     command = [args.engine, "diagnose", work / "job.json", "--out", work / "diagnose", "--progress", "text",
                "--threads", str(args.threads), "--time-budget", str(args.time_budget)]
     if args.effects:
@@ -112,6 +119,46 @@ def run_liquid(args, name):
     if run.returncode != 0:
         sys.exit(f"diagnose failed (exit {run.returncode}): {run.stderr.strip()}")
     report(name, json.loads((work / "diagnose/diagnosis.json").read_text()), wall, args)
+
+
+def identify_power_law(args, name, work, job):
+    """K and n of a power law searched together on both runs, each run's scene turned into that law."""
+    for run in job["runs"]:
+        scene_file = work / f"power_law_{run['scene']}"
+        doc = json.loads((work / run["scene"]).read_text())
+        doc["material"]["model"] = {"type": "power_law", "consistency": 2.5, "flow_index": 0.75}
+        scene_file.write_text(json.dumps(doc, indent=1))
+        run["scene"] = scene_file.name
+    job["parameters"] = [{"name": "consistency", "initial": 2.5, "spread": 1.0, "min": 0.05, "max": 200},
+                         {"name": "flow_index", "initial": 0.75, "spread": 0.3, "min": 0.1, "max": 1.0}]
+    job["time_budget_s"] = args.time_budget
+    (work / "power_law_job.json").write_text(json.dumps(job, indent=1))
+    command = [args.engine, "identify", work / "power_law_job.json", "--out", work / "power_law", "--progress",
+               "none", "--threads", str(args.threads), "--no-fields", "--no-plots"]
+    started = time.monotonic()
+    run = subprocess.run(command, capture_output=True, text=True)
+    wall = time.monotonic() - started
+    if run.returncode != 0:
+        sys.exit(f"identify failed (exit {run.returncode}): {run.stderr.strip()}")
+    result = json.loads((work / "power_law/result.json").read_text())
+    K, n = (result["parameters"][p]["value"] for p in ("consistency", "flow_index"))
+    print(f"{name}: power law on both runs, {args.resolution} cells, {args.threads} threads, {wall:.0f} s wall: "
+          f"{values(result)} ({result['parameters']['flow_index']['interval_method'].split(':')[0]}); "
+          f"E {result['E']:.4g}, {result['generations']} generations ({result['coarse_generations']} coarse), "
+          f"{result['evaluations']} evaluations, stopped {result['stop']}")
+    rates = args.rates
+    diagnosis = work / "diagnose/diagnosis.json"
+    if not rates and diagnosis.is_file():
+        fits = [m for m in json.loads(diagnosis.read_text())["candidates"] if m["model"] == "shear_thinning"]
+        rates = fits[0].get("shear_rate_range_per_s") if fits else None
+    low, high = rates or (1, 100)
+    tau_y, k_rheometer, n_rheometer = LIQUIDS[name]["rheometer"][args.temperature]
+    steps = [low * (high / low) ** (k / 15) for k in range(16)]
+    rms = math.sqrt(sum(math.log10(K * g ** n / (tau_y + k_rheometer * g ** n_rheometer)) ** 2 for g in steps) / 16)
+    print(f"  flow curve: log10 stress RMS {rms:.3f} against the rheometer ({args.temperature} °C) over "
+          f"{low:.3g}–{high:.3g} s⁻¹")
+    for line in result["doubts"]:
+        print(f"  doubt: {line}")
 
 
 def values(model):
@@ -155,6 +202,10 @@ def main():
     parser.add_argument("--temperature", type=int, choices=(22, 23, 24, 25), default=23,
                         help="°C of the rheometer's ramp compared with")
     parser.add_argument("--effects", help="the candidates, comma-separated (default: every one)")
+    parser.add_argument("--power-law", action="store_true",
+                        help="identify a power law's K and n on both runs instead of diagnosing")
+    parser.add_argument("--rates", type=float, nargs=2, metavar=("LOW", "HIGH"),
+                        help="with --power-law: the shear rates (1/s) its flow curve is compared over")
     parser.add_argument("--work", help="folder for the scenes, jobs and results (default: a temporary one)")
     args = parser.parse_args()
     for name in (("sauce", "lotion") if args.liquid == "both" else (args.liquid,)):
