@@ -577,24 +577,27 @@ TEST_F(IdentifyLoop, SeveralRunsOfOneLiquidShareItsParameters) {
     EXPECT_LT(identifyFromRunsAndAlone(jobs, {kEtaTrue})[0], 0.10);
 }
 
-// A shear-thinning liquid (power law, K = 3 Pa·sⁿ, n = 0.6) searched for K and n at once, from both
-// runs and from each alone, on 28 cells against references of 36. It prints the figures and claims
-// nothing: on the CI grids (20 against 24) the two runs together did worse than either alone, here
+// A shear-thinning liquid, a power law of K = 3 Pa·sⁿ and n = 0.6, and the search of both at once.
+constexpr double kThinningConsistency = 3, kThinningIndex = 0.6;
+const json kThinningMaterial = {
+    {"density", 1400},
+    {"viscosity", 1.0},
+    {"surface_tension", 0.0},
+    {"model", {{"type", "power_law"}, {"consistency", kThinningConsistency}, {"flow_index", kThinningIndex}}}};
+const json kThinningSearch = {
+    {{"name", "consistency"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 0.1}, {"max", 100.0}},
+    {{"name", "flow_index"}, {"initial", 1.0}, {"spread", 0.5}, {"min", 0.3}, {"max", 1.5}}};
+
+// That liquid searched for K and n at once, from both runs and from each alone, on 28 cells against
+// references of 36. It prints the figures and claims nothing: on the CI grids (20 against 24) the two runs together did worse than either alone, here
 // better (tests/bench/FINDINGS.md, "Several runs of one liquid"). About 9 minutes, so it is run by
 // hand (--gtest_also_run_disabled_tests), not in CI.
 TEST_F(IdentifyLoop, DISABLED_SeveralRunsOfAShearThinningLiquidIdentifyItsLaw) {
-    const double K = 3, n = 0.6;
-    const json material = {{"density", 1400},
-                           {"viscosity", 1.0},
-                           {"surface_tension", 0.0},
-                           {"model", {{"type", "power_law"}, {"consistency", K}, {"flow_index", n}}}};
-    const json parameters = {{{"name", "consistency"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 0.1}, {"max", 100.0}},
-                             {{"name", "flow_index"}, {"initial", 1.0}, {"spread", 0.5}, {"min", 0.3}, {"max", 1.5}}};
     json search = jobJson();
     search["max_generations"] = 24;
     search["resolution"] = 28;
-    const ColumnJobs jobs = columnJobs(material, parameters, "power_law", dir_, search, 36);
-    identifyFromRunsAndAlone(jobs, {K, n});
+    const ColumnJobs jobs = columnJobs(kThinningMaterial, kThinningSearch, "power_law", dir_, search, 36);
+    identifyFromRunsAndAlone(jobs, {kThinningConsistency, kThinningIndex});
 }
 
 // Two parameters on a rough E: tolerance_fun's medians need the search narrower than E's valley
@@ -603,20 +606,13 @@ TEST_F(IdentifyLoop, DISABLED_SeveralRunsOfAShearThinningLiquidIdentifyItsLaw) {
 // profile's interval), and that interval holds the hidden law: the liquid of the test above, from
 // both runs on 16 cells against references of 24.
 TEST_F(IdentifyLoop, SeveralParametersEndOnceTheSearchSamplesOnlyWhatECannotTellApart) {
-    const double K = 3, n = 0.6;
-    const json material = {{"density", 1400},
-                           {"viscosity", 1.0},
-                           {"surface_tension", 0.0},
-                           {"model", {{"type", "power_law"}, {"consistency", K}, {"flow_index", n}}}};
-    const json parameters = {{{"name", "consistency"}, {"initial", 10.0}, {"spread", 10.0}, {"min", 0.1}, {"max", 100.0}},
-                             {{"name", "flow_index"}, {"initial", 1.0}, {"spread", 0.5}, {"min", 0.3}, {"max", 1.5}}};
     json search = jobJson();
     search["max_generations"] = 30;
-    const ColumnJobs jobs = columnJobs(material, parameters, "resolved", dir_, search, 24);
+    const ColumnJobs jobs = columnJobs(kThinningMaterial, kThinningSearch, "resolved", dir_, search, 24);
     identify::IdentifyOptions options;
     options.writeFields = false;
     const identify::IdentificationResult result = identify::identify(job(jobs.both), dir_ / "resolved_out", options);
-    const std::array<double, 2> truth{K, n};
+    const std::array<double, 2> truth{kThinningConsistency, kThinningIndex};
     std::printf("[ identify ] stop %s after %d generations (%ld evaluations), interval method %s:", identify::toString(result.stop),
                 result.generations, result.evaluations, result.intervalMethod.c_str());
     for (size_t i = 0; i < truth.size(); ++i)

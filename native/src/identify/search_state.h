@@ -250,8 +250,8 @@ std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationReco
 // when its vertex lies among the fitted points; `info` receives fitProfile's account.
 std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
                                       nlohmann::json& info);
-// The interval reported: the profile band (or the joint profile's) when there is one, else the CMA band, widened by each grid
-// check's reach, made to contain θ*, and clipped into the bounds.
+// The interval reported: the profile's band (or the joint profile's) when there is one, else the
+// CMA band, widened by each grid check's reach, made to contain θ*, and clipped into the bounds.
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);
 // "profile", "joint_profile" or "cma", "+alignment" and "+resolution" for the checks that changed it:
 // IdentificationResult::intervalMethod.
