@@ -607,7 +607,7 @@ TEST_F(IdentifyLoop, DISABLED_SeveralRunsOfAShearThinningLiquidIdentifyItsLaw) {
 // both runs on 16 cells against references of 24.
 TEST_F(IdentifyLoop, SeveralParametersEndOnceTheSearchSamplesOnlyWhatECannotTellApart) {
     json search = jobJson();
-    search["max_generations"] = 30;
+    search["max_generations"] = 60;
     const ColumnJobs jobs = columnJobs(kThinningMaterial, kThinningSearch, "resolved", dir_, search, 24);
     identify::IdentifyOptions options;
     options.writeFields = false;
@@ -619,7 +619,7 @@ TEST_F(IdentifyLoop, SeveralParametersEndOnceTheSearchSamplesOnlyWhatECannotTell
         std::printf(" %.4f [%.4f, %.4f] (truth %.2f)", result.theta[i], result.interval[i][0], result.interval[i][1], truth[i]);
     std::printf("\n");
     EXPECT_EQ(result.stop, identify::StopReason::Resolved);
-    EXPECT_LT(result.generations, 30);
+    EXPECT_LT(result.generations, 60);
     EXPECT_EQ(result.intervalMethod, "joint_profile");
     for (size_t i = 0; i < truth.size(); ++i) {
         EXPECT_LE(result.interval[i][0], truth[i]) << i;

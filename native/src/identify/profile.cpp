@@ -14,6 +14,11 @@ namespace viscoscope::identify {
 
 using json = nlohmann::json;
 
+namespace {
+// The joint profile's quadric is fitted over the points whose E lies within this factor of the least.
+constexpr double kLowEFactor = 3;
+}  // namespace
+
 double profileVariable(bool inverse, double theta) { return inverse ? 1 / theta : std::log(theta); }
 double profileParameter(bool inverse, double u) { return inverse ? 1 / u : std::exp(u); }
 
@@ -82,21 +87,33 @@ std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::
         near.push_back(x);
         E.push_back(e);
     }
-    const int m = static_cast<int>(near.size());
+    if (near.size() < size_t(2 * coefficients)) {
+        info["points"] = near.size();
+        return std::nullopt;
+    }
+    // Only where E is low: across a ridge E rises steeply and far from quadratically, and the misfit,
+    // read as jitter, would widen ΔE (FINDINGS, "Several parameters: the joint profile"). The points
+    // within kLowEFactor of the least, or else the 2 × coefficients lowest.
+    std::vector<size_t> order(near.size());
+    for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return E[a] < E[b]; });
+    size_t kept = 2 * coefficients;
+    while (kept < order.size() && E[order[kept]] <= kLowEFactor * E[order.front()]) ++kept;
+    order.resize(kept);
+    const int m = static_cast<int>(kept);
     info["points"] = m;
     info["variable"] = "ln θ";
-    if (m < 2 * coefficients) return std::nullopt;
     // Columns 1, x_i, then ½x_i² and x_i x_j (i < j), so that the coefficients are E, g and H.
     Eigen::MatrixXd A(m, coefficients);
     Eigen::VectorXd y(m);
     for (int r = 0; r < m; ++r) {
-        const Eigen::VectorXd& x = near[r];
+        const Eigen::VectorXd& x = near[order[r]];
         int c = 0;
         A(r, c++) = 1;
         for (int i = 0; i < d; ++i) A(r, c++) = x[i];
         for (int i = 0; i < d; ++i)
             for (int j = i; j < d; ++j) A(r, c++) = i == j ? 0.5 * x[i] * x[i] : x[i] * x[j];
-        y[r] = E[r];
+        y[r] = E[order[r]];
     }
     const Eigen::VectorXd coef = A.colPivHouseholderQr().solve(y);
     const Eigen::VectorXd fitted = A * coef;
@@ -106,8 +123,8 @@ std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::
     for (int i = 0, c = 1 + d; i < d; ++i)
         for (int j = i; j < d; ++j) H(i, j) = H(j, i) = coef[c++];
     const Eigen::VectorXd curvatures = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(H).eigenvalues();
-    Eigen::VectorXd lowest = near.front(), highest = near.front();
-    for (const Eigen::VectorXd& x : near) lowest = lowest.cwiseMin(x), highest = highest.cwiseMax(x);
+    Eigen::VectorXd lowest = near[order.front()], highest = lowest;
+    for (size_t k : order) lowest = lowest.cwiseMin(near[k]), highest = highest.cwiseMax(near[k]);
     std::optional<Eigen::VectorXd> vertex;
     if (curvatures.minCoeff() > 0) {
         const Eigen::VectorXd v = H.ldlt().solve(-g);

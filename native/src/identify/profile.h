@@ -36,8 +36,9 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
                                      double range, bool inverse, nlohmann::json& info);
 // E near its best in several parameters, the joint profile: a least-squares quadric in x = ln θ,
 // E ≈ a + gᵀ(x − x_b) + ½ (x − x_b)ᵀ H (x − x_b), over the points (θ, E) within `range` of the best
-// θ_b in every ln θ_i, at least twice as many as the quadric's coefficients; ΔE = max(2 × jitter,
-// E_min/100) as in fitProfile. Each parameter's interval spans every point, within `range` or not,
+// θ_b in every ln θ_i where E is low (see kLowEFactor; at least twice as many as the quadric's
+// coefficients, the lowest; none with fewer in range); ΔE = max(2 × jitter, E_min/100) as in
+// fitProfile. Each parameter's interval spans every point, within `range` or not,
 // whose E lies within ΔE of the quadric's least, and where H is positive definite with its vertex
 // within the points' span (bounded), also where the quadric, minimized over the other parameters,
 // stays within ΔE of its least: x_v,i ± √(2ΔE (H⁻¹)_ii). Not bounded, E has no minimum along some
