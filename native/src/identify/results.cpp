@@ -210,9 +210,10 @@ json parameterEntry(const Job& job, const LogSearchSpace& bounds, const Paramete
                                             "of its minimum"
                        : estimate.jointProfile
                            ? "joint profile: quadric fit of E in ln θ over full-fidelity evaluations within ±0.5 "
-                             "of the best one in every ln θ_i; band spanning the evaluations whose E is within "
-                             "ΔE = max(2·jitter, 1 % E_min) of its least and, where it has a minimum among them, "
-                             "where its least over the other parameters stays within ΔE (joint_profile)"
+                             "of the best one in every ln θ_i and with E within 3× its E; band spanning the "
+                             "evaluations whose E is within ΔE = max(2·jitter, 1 % E_min) of its least and, where "
+                             "it has a minimum among them, where its least over the other parameters stays within "
+                             "ΔE (joint_profile)"
                            : "cma: exp(m ± 2σ√C_ii) of the final CMA-ES distribution in log space";
     if (estimate.widenedBy(estimate.alignment))
         method += "; alignment: widened to θ*·exp(±|ln(θ_s/θ*)|), θ_s the minimum on the grid moved along x "
