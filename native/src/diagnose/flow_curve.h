@@ -16,7 +16,8 @@ constexpr double kRheometerLogStressWarning = 0.15;
 // `fit` of `model` (its job: the law and parameters) as diagnosis.json's "flow_curve": the model,
 // the shear-rate range, points of γ̇, τ, η and τ's band (the least and greatest over the evaluations
 // E cannot tell from θ*, or else over the corners of the parameters' intervals), and with
-// `model.rheometer` the RMS of log10 τ against it over the range both cover. Null when the fit's flow has no shear-rate range (the thin film).
+// `model.rheometer` the RMS of log10 τ against it over the range both cover. Null when the fit's
+// flow has no shear-rate range (the thin film).
 nlohmann::json flowCurve(const ModelFit& fit, const identify::Job& model);
 
 }  // namespace viscoscope::diagnose

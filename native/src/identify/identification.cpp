@@ -211,13 +211,10 @@ bool resolved(const std::vector<GenerationRecord>& generations, const std::vecto
     for (int g = last - count + 1; g <= last; ++g) {
         const auto record = std::find_if(generations.begin(), generations.end(),
                                          [&](const GenerationRecord& r) { return r.generation == g; });
-        if (record == generations.end() || record->fidelity != Fidelity::Full) return false;
-        std::vector<EvaluationRecord> upTo;
-        for (const EvaluationRecord& e : evaluated)
-            if (e.generation <= g) upTo.push_back(e);
-        if (record->bestTheta.empty()) return false;
+        if (record == generations.end() || record->fidelity != Fidelity::Full || record->bestTheta.empty())
+            return false;
         json unused;
-        const std::optional<JointProfileFit> joint = jointProfileNear(upTo, record->bestTheta, unused);
+        const std::optional<JointProfileFit> joint = jointProfileNear(evaluated, g, record->bestTheta, unused);
         if (!joint) return false;
         for (size_t i = 0; i < joint->interval.size(); ++i) {
             const double m = std::log(record->meanTheta[i]), reach = 2 * record->logStd[i];
@@ -485,7 +482,7 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     if (!best) throw std::runtime_error("no successful evaluation");
     json jointProfileInfo;
     const std::optional<JointProfileFit> joint =
-        n > 1 ? jointProfileNear(state.evaluated, best->theta, jointProfileInfo) : std::nullopt;
+        n > 1 ? jointProfileNear(state.evaluated, es.generation(), best->theta, jointProfileInfo) : std::nullopt;
     if (joint && !joint->bounded) {
         std::string names;
         for (const ParameterSpec& p : job.parameters) names += (names.empty() ? "" : ", ") + p.name();

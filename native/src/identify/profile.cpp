@@ -131,9 +131,8 @@ std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::
         if ((v.array() >= lowest.array()).all() && (v.array() <= highest.array()).all()) vertex = v;
     }
     JointProfileFit fit;
-    fit.jitter = jitter;
     const double least = vertex ? coef[0] + 0.5 * g.dot(*vertex) : fitted.minCoeff();
-    fit.deltaE = std::max(2 * jitter, 0.01 * std::abs(least));
+    const double deltaE = std::max(2 * jitter, 0.01 * std::abs(least));
     // Every point E cannot tell from the least, also beyond `range` (a ridge runs on past it): the
     // quadric alone would leave out a curved valley's far points, whose misfit it reads as jitter.
     fit.interval.assign(d, {INFINITY, 0});
@@ -141,26 +140,27 @@ std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::
         fit.interval[i] = {std::min(fit.interval[i][0], theta), std::max(fit.interval[i][1], theta)};
     };
     for (const auto& [at, e] : points)
-        if (at.size() == thetaBest.size() && e <= least + fit.deltaE) {
+        if (at.size() == thetaBest.size() && e <= least + deltaE) {
             for (int i = 0; i < d; ++i) include(i, at[i]);
             fit.indistinguishable.push_back(at);
         }
     if (vertex) {
         const Eigen::MatrixXd covariance = H.inverse();
+        std::vector<double> thetaMin;
         for (int i = 0; i < d; ++i) {
-            const double half = std::sqrt(2 * fit.deltaE * covariance(i, i));
+            const double half = std::sqrt(2 * deltaE * covariance(i, i));
             include(i, thetaBest[i] * std::exp((*vertex)[i] - half));
             include(i, thetaBest[i] * std::exp((*vertex)[i] + half));
-            fit.vertex.push_back(thetaBest[i] * std::exp((*vertex)[i]));
+            thetaMin.push_back(thetaBest[i] * std::exp((*vertex)[i]));
         }
         fit.bounded = true;
+        info["theta_min"] = thetaMin;
     }
     for (int i = 0; i < d; ++i) include(i, thetaBest[i]);
     info["jitter"] = jitter;
-    info["delta_E"] = fit.deltaE;
+    info["delta_E"] = deltaE;
     info["curvatures"] = std::vector<double>(curvatures.data(), curvatures.data() + d);
     info["bounded"] = fit.bounded;
-    if (fit.bounded) info["theta_min"] = fit.vertex;
     return fit;
 }
 

@@ -38,19 +38,19 @@ std::optional<ProfileFit> fitProfile(const std::vector<std::pair<double, double>
 // E ≈ a + gᵀ(x − x_b) + ½ (x − x_b)ᵀ H (x − x_b), over the points (θ, E) within `range` of the best
 // θ_b in every ln θ_i where E is low (see kLowEFactor; at least twice as many as the quadric's
 // coefficients, the lowest; none with fewer in range); ΔE = max(2 × jitter, E_min/100) as in
-// fitProfile. Each parameter's interval spans every point, within `range` or not,
-// whose E lies within ΔE of the quadric's least, and where H is positive definite with its vertex
+// fitProfile. Each parameter's interval spans every point, within `range` or not, whose E lies
+// within ΔE of the quadric's least, and where H is positive definite with its vertex
 // within the points' span (bounded), also where the quadric, minimized over the other parameters,
 // stays within ΔE of its least: x_v,i ± √(2ΔE (H⁻¹)_ii). Not bounded, E has no minimum along some
 // line among the points: the parameters trade off along a ridge the data do not resolve, as a power
 // law's K and n do over the narrow range of shear rates one flow exercises. The search's
 // distribution, by contrast, narrows wherever the search happens to wander.
+// `info` receives the figures: points, jitter, delta_E, curvatures (H's eigenvalues), bounded and,
+// when bounded, theta_min (the quadric's vertex).
 struct JointProfileFit {
     std::vector<std::array<double, 2>> interval;  // θ, per parameter
     bool bounded = false;                         // H positive definite, its vertex among the points
-    std::vector<double> vertex;                   // θ at the quadric's minimum, when bounded
     std::vector<std::vector<double>> indistinguishable;  // θ of the points within ΔE of its least
-    double jitter = 0, deltaE = 0;
 };
 std::optional<JointProfileFit> fitJointProfile(const std::vector<std::pair<std::vector<double>, double>>& points,
                                                const std::vector<double>& thetaBest, double range,

@@ -144,11 +144,12 @@ ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds
     return estimate;
 }
 
-std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated,
+std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated, int lastGeneration,
                                                 const std::vector<double>& best, json& info) {
     std::vector<std::pair<std::vector<double>, double>> points;
     for (const EvaluationRecord& e : evaluated)
-        if (e.fidelity == Fidelity::Full && e.succeeded()) points.emplace_back(e.theta(), e.E());
+        if (e.fidelity == Fidelity::Full && e.succeeded() && e.generation <= lastGeneration)
+            points.emplace_back(e.theta(), e.E());
     return fitJointProfile(points, best, kProfileRange, info);
 }
 

@@ -243,8 +243,9 @@ ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds
                                     const std::vector<EvaluationRecord>& evaluated, int i, double value,
                                     const std::optional<JointProfileFit>& joint);
 // The joint profile (fitJointProfile) of a search of several parameters over its successful
-// full-fidelity evaluations around θ* = `best`; `info` receives its account.
-std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated,
+// full-fidelity evaluations up to generation `lastGeneration`, around θ* = `best`; `info` receives
+// its account.
+std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated, int lastGeneration,
                                                 const std::vector<double>& best, nlohmann::json& info);
 // The profile fit of a one-parameter search's full-fidelity evaluations around θ* = `value`, kept
 // when its vertex lies among the fitted points; `info` receives fitProfile's account.
