@@ -224,9 +224,12 @@ class ViscoscopeSceneSettings(bpy.types.PropertyGroup):
                                              "fractions of a cell, so that where small features such as the "
                                              "hole fall against the cells matters less")
     placement_schedule: EnumProperty(name="Placements", items=PLACEMENT_SCHEDULE_ITEMS, default='by_generation')
-    time_budget_minutes: FloatProperty(name="Time Budget (min)", default=10.0, min=0.0, max=10000.0,
-                                       description="Wall time for the whole identification; the engine stops "
-                                                   "before a generation that would overrun it (0 = no limit)")
+    time_budget_minutes: FloatProperty(name="Time Budget (min)", default=0.0, min=0.0, max=10000.0,
+                                       description="A cap on the identification's wall time: the engine stops "
+                                                   "before a generation that would overrun it, and a search it "
+                                                   "stops is doubted as unconverged. 0 = none: the search ends "
+                                                   "when it settles, at most after Max Generations, and takes "
+                                                   "the same path on any machine")
     diagnosis_budget_minutes: FloatProperty(name="Time Budget (min)", default=30.0, min=0.0, max=10000.0,
                                             description="Wall time for the whole diagnosis, shared by its fits "
                                                         "(the base and each effect); 0 = each fit has the "

@@ -6,9 +6,10 @@
 #   2. `identify`: extract that clip's silhouettes like footage (against the rendered clean plate, no
 #      mask of the cup: the opaque cup hides what it hides in the simulated silhouettes too) and search
 #      η by CMA-ES over 60³ simulations (the grid the cup's hole needs, as the add-on raises it to)
-#      within the add-on's default 10-minute budget, into out/capture_cup/identify/;
+#      with no time budget, the add-on's default: the search ends when it settles, on the same
+#      path on any machine, into out/capture_cup/identify/;
 #   3. print η* with its interval against the truth.
-# About 13 minutes on 2 cores after the build (3 for the clip, 10 for the search). Ctrl-C stops it
+# About 21 minutes on 2 cores after the build (3 for the clip, 18 for the search and its grid checks). Ctrl-C stops it
 # with its work kept; running it again resumes both steps where they stopped. Extra arguments go to
 # `identify` (e.g. --threads 1).
 set -euo pipefail
@@ -21,7 +22,7 @@ build/bin/viscoscope synth sample_scenes/capture_cup.json --camera sample_scenes
   --out "$out/synth"
 
 # The add-on's defaults (Identify panel): start at 5 Pa·s, spread ×3, two grid placements in turn, the
-# grid raised to 60.
+# grid raised to 60, at most 20 generations, no time budget.
 # Paths are relative to the job file.
 cat > "$out/job.json" <<'JOB'
 {
@@ -33,7 +34,8 @@ cat > "$out/job.json" <<'JOB'
   "parameters": [{"name": "viscosity", "initial": 5, "spread": 10, "min": 0.001, "max": 10000}],
   "resolution": 60,
   "grid_placements": 2,
-  "time_budget_s": 600,
+  "max_generations": 20,
+  "time_budget_s": 0,
   "seed": 3
 }
 JOB

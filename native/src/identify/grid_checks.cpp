@@ -54,7 +54,6 @@ struct GridCheckSpec {
     std::vector<double> gridShifts;  // E is the mean over these grids
     unsigned seedOffset;
     std::optional<CheckScores> SearchState::*scores;
-    double seconds;  // predicted
 };
 
 // σ of ln θ_m for a two-point minimum θ_m (see the resolution check above).
@@ -78,7 +77,7 @@ std::optional<double> checkMinimum(const ProfileFit& profile, bool inverse, cons
 // or one killed after the check), and finds the minimum on its grid.
 GridCheckOutcome runGridCheck(const GridCheckSpec& spec, const Job& job, EvaluationPool& pool,
                               const Observations& observations, SearchState& state,
-                              const std::optional<ProfileFit>& profile, double thetaStar, const TimeBudget& budget,
+                              const std::optional<ProfileFit>& profile, double thetaStar,
                               const std::function<void()>& saved) {
     GridCheckOutcome outcome;
     json& check = outcome.entry;
@@ -89,13 +88,6 @@ GridCheckOutcome runGridCheck(const GridCheckSpec& spec, const Job& job, Evaluat
     if (!profile) {
         outcome.warning = name + ": skipped, no profile fit of E near θ* to take its curvature from (too few "
                           "full-fidelity evaluations near it); the interval leaves out the grid's share of the error";
-        check["skipped"] = *outcome.warning;
-        return outcome;
-    }
-    if (!cached && !budget.fits(spec.seconds)) {
-        outcome.warning = name + ": skipped, its evaluations (about " + wholeSeconds(spec.seconds) +
-                          " s) do not fit time_budget_s (" + wholeSeconds(job.timeBudget) + " s); the interval "
-                          "leaves out the grid's share of the error";
         check["skipped"] = *outcome.warning;
         return outcome;
     }
@@ -141,11 +133,11 @@ int resolutionCheckCells(const Job& job) {
 
 GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
-                                const TimeBudget& budget, const std::function<void()>& saved) {
+                                const std::function<void()>& saved) {
     const double shift = kAlignmentShift / job.gridPlacements;
     GridCheckOutcome outcome = runGridCheck({"alignment_check", job.resolution, {shift}, kAlignmentSeedOffset,
-                                             &SearchState::alignment, budget.checkSeconds(GridCheck::Alignment)},
-                                            job, pool, observations, state, profile, thetaStar, budget, saved);
+                                             &SearchState::alignment},
+                                            job, pool, observations, state, profile, thetaStar, saved);
     outcome.entry["grid_shift_cells"] = {shift, shift, 0.0};
     outcome.entry["seed_offset"] = kAlignmentSeedOffset;
     if (outcome.minimum)
@@ -155,8 +147,7 @@ GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Obse
 
 GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                  SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
-                                 const GridCheckOutcome& alignment, const TimeBudget& budget,
-                                 const std::function<void()>& saved) {
+                                 const GridCheckOutcome& alignment, const std::function<void()>& saved) {
     const int cells = resolutionCheckCells(job);
     // On every placement the search took in turn, as θ* is their mean's minimum.
     std::vector<double> shifts{0.0};
@@ -173,9 +164,8 @@ GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Obs
         outcome.entry["skipped"] = *outcome.warning;
         return outcome;
     }
-    GridCheckOutcome outcome = runGridCheck({"resolution_check", cells, shifts, 0, &SearchState::resolution,
-                                             budget.checkSeconds(GridCheck::Resolution)},
-                                            job, pool, observations, state, profile, thetaStar, budget, saved);
+    GridCheckOutcome outcome = runGridCheck({"resolution_check", cells, shifts, 0, &SearchState::resolution},
+                                            job, pool, observations, state, profile, thetaStar, saved);
     outcome.entry["resolution"] = cells;
     if (outcome.entry.contains("skipped")) return outcome;
     if (!outcome.minimum || !std::isfinite(*outcome.minimum)) {

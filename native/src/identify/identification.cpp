@@ -12,11 +12,11 @@
 //     A coarser grid is biased: the cup's hole a few cells wide drains too fast, so its optimum
 //     sits above the truth (see kCoarseToFineShift), while the first third of the frames on the
 //     job's grid put the minimum at the truth for about the cost of all frames on the coarser grid;
-//   * the coarse phase ends early once every log-space standard deviation σ√C_ii < 0.02 + 10·tol_x
-//     (the coarse optimum differs from the full-fidelity one by more than that, so more coarse
-//     generations are wasted),
-//     or, with a time budget, once another coarse generation would end past kCoarseBudgetShare of it
-//     or past the time the minimum full-fidelity generations are predicted to need;
+//   * the coarse phase ends early once every log-space standard deviation σ√C_ii is below
+//     kCoarseToFineShift, the spread the full-fidelity phase restarts with: a narrower coarse search
+//     is discarded at the switch. The time budget never ends it: the plan follows from the job and
+//     the data, so that a slower machine runs the same generations (the budget only cuts the
+//     full-fidelity phase short, and says so);
 //   * at the switch CMA-ES restarts at the best coarse evaluation with a log-space spread of
 //     kCoarseToFineShift in every coordinate (counters and random stream go on), the first full
 //     generation scores that point too, and the best-so-far is reset: E values of different
@@ -29,14 +29,21 @@
 //     all miss a far optimum, and σ grows too slowly to make up for it within a budget (the
 //     300 Pa·s reference's search from the table's common start ran out of time far below it).
 //     A caller's start curve is scanned the same way, in any
-//     dimension, with the restart's spread along the curve (restartAlongScan);
+//     dimension, with the restart's spread along the curve (restartAlongScan). Later coarse
+//     generations in one dimension refine the scan (refinePoints): their λ points lie evenly inside
+//     the best point's bracket, and CMA-ES restarts at the best coarse point with half their
+//     spacing, a bracketing line search that narrows the bracket by (λ + 1)/2 a generation, where
+//     CMA-ES's own σ shrinks slowly with λ = 4 (FINDINGS, "A plan the machine's speed does not
+//     change");
 //   * in one dimension each later full-fidelity generation scores, in place of a sample, the
-//     vertex of the parabola through the best full-fidelity evaluation and its neighbours (see
-//     parabolicProposal), clipped as an injected solution;
+//     vertex of the parabola through the best full-fidelity evaluation and its neighbours, or a
+//     step beyond the best when it ends the profile (see profileProposal), clipped as an injected
+//     solution;
 //   * tolerances are checked only at full fidelity, after fidelity.min_fine_generations there:
 //     tolerance_x on the search distribution's spread, tolerance_fun on a simulation's E (see
 //     settled), in one dimension only once the evaluations give a profile (the interval's, and the
-//     grid checks').
+//     grid checks'), and "resolved" once the search samples only what the profile's interval
+//     cannot tell apart (see resolved).
 //
 // θ*: the best full-fidelity evaluation. A parabola fitted to E (against 1/η; see fitProfile) over
 // the evaluations near it gives the interval; its vertex is reported (profile_fit.theta_min) but not
@@ -159,6 +166,19 @@ std::vector<Eigen::VectorXd> scanPoints(const LogSearchSpace& space, int count,
     return points;
 }
 
+// A one-dimensional coarse generation after the scan: `count` points evenly inside the bracket
+// m ± 2σ (within the bounds) around CMA-ES's mean, which a scan or refinement set to the best coarse
+// point with σ half the spacing, so the bracket reaches to the best point's neighbours; neither end
+// nor, for an even count, the middle is scored again.
+std::vector<Eigen::VectorXd> refinePoints(const CmaEs& es, const LogSearchSpace& space, int count) {
+    const double reach = 2 * es.standardDeviations()[0];
+    const double lo = std::max(space.lower[0], es.mean()[0] - reach);
+    const double hi = std::min(space.upper[0], es.mean()[0] + reach);
+    std::vector<Eigen::VectorXd> points;
+    for (int k = 1; k <= count; ++k) points.push_back(Eigen::VectorXd::Constant(1, lo + (hi - lo) * k / (count + 1)));
+    return points;
+}
+
 // Where CMA-ES starts again after a scan (points in the curve's order): at the best point, its
 // standard deviation along the chord through the best point's neighbours a quarter of that chord
 // (half a step of an even scan), across it kAcrossScan of that. A diagonal spread as wide across
@@ -199,28 +219,38 @@ bool settled(const std::vector<EvaluationRecord>& evaluated, int last, int count
     return true;
 }
 
-// Has a search of several parameters come down to what E can resolve? In each of the `count` full-
-// fidelity generations ending with `last`, its distribution's band exp(m ± 2σ√C_ii) (within the
-// bounds) lies, for every parameter, inside the joint profile's interval over the evaluations up to
-// that generation: it samples only θ the comparison cannot tell from the best, and more generations
-// wander among them. tolerance_fun's medians need the distribution narrower than E's valley across
-// a ridge, which a power law's K and n never reached on the ViRheometry fronts (FINDINGS, "Several
-// parameters: the joint profile").
-bool resolved(const std::vector<GenerationRecord>& generations, const std::vector<EvaluationRecord>& evaluated,
-              const LogSearchSpace& bounds, int last, int count) {
+// Has the search come down to what E can resolve? In each of the `count` full-fidelity generations
+// ending with `last`, its distribution's band exp(m ± 2σ√C_ii) (within the bounds) lies, for every
+// parameter, inside the profile's interval over the evaluations up to that generation (in one
+// dimension the profile fit's, in several the joint profile's): it samples only θ the comparison
+// cannot tell from the best, and more generations wander among them. tolerance_fun's medians need
+// the distribution narrower than E's valley, which a power law's K and n never reached on the
+// ViRheometry fronts (FINDINGS, "Several parameters: the joint profile"), and the sample cup's
+// viscosity, whose E is a V, reached only after several generations more (FINDINGS, "A plan the
+// machine's speed does not change").
+bool resolved(const Job& job, const std::vector<GenerationRecord>& generations,
+              const std::vector<EvaluationRecord>& evaluated, const LogSearchSpace& bounds, int last, int count) {
     for (int g = last - count + 1; g <= last; ++g) {
         const auto record = std::find_if(generations.begin(), generations.end(),
                                          [&](const GenerationRecord& r) { return r.generation == g; });
         if (record == generations.end() || record->fidelity != Fidelity::Full || record->bestTheta.empty())
             return false;
         json unused;
-        const std::optional<JointProfileFit> joint = jointProfileNear(evaluated, g, record->bestTheta, unused);
-        if (!joint) return false;
-        for (size_t i = 0; i < joint->interval.size(); ++i) {
+        std::vector<std::array<double, 2>> intervals;
+        if (job.parameters.size() == 1) {
+            const std::optional<ProfileFit> profile = profileNear(job, evaluated, record->bestTheta[0], unused, g);
+            if (!profile) return false;
+            intervals.push_back(profile->interval);
+        } else {
+            const std::optional<JointProfileFit> joint = jointProfileNear(evaluated, g, record->bestTheta, unused);
+            if (!joint) return false;
+            intervals = joint->interval;
+        }
+        for (size_t i = 0; i < intervals.size(); ++i) {
             const double m = std::log(record->meanTheta[i]), reach = 2 * record->logStd[i];
             const double low = std::exp(std::max(m - reach, bounds.lower[i]));
             const double high = std::exp(std::min(m + reach, bounds.upper[i]));
-            if (low < joint->interval[i][0] || high > joint->interval[i][1]) return false;
+            if (low < intervals[i][0] || high > intervals[i][1]) return false;
         }
     }
     return true;
@@ -256,7 +286,6 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     const int n = static_cast<int>(job.parameters.size());
     const LogSearchSpace bounds = logSearchSpace(job);
     const FidelityPlan plan{coarseResolution(job), job.resolution, lastSimFrame(observations.coarse), lastSimFrame(obs)};
-    const double coarseTolerance = 0.02 + 10 * job.toleranceX;
     const Checkpoint checkpoint(job, outDir);
     const FieldsStore fields(outDir, checkpoint.fingerprint(), plan.fullFrames + 1);
     // The thin-film model has a radius, no 3D fields for Blender.
@@ -295,13 +324,27 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     // place of their last sample; not when an evaluation lies within kProposalSpacing of it, since
     // the same θ scores the same E. With λ = 4 and a spread of ln 1.4, CMA-ES's samples mostly land
     // away from the optimum it brackets (tests/bench/FINDINGS.md, "Figures moved from code comments").
-    auto parabolicProposal = [&]() -> std::optional<Eigen::VectorXd> {
+    // When the lowest point ends the profile, nothing brackets it: the proposal is then one of
+    // CMA-ES's standard deviations beyond it ("extension"). The mean over placements spans only where
+    // every placement has scored, and CMA-ES's samples on one placement can stay on one side of
+    // the other's minimum for generations, leaving the profile, and so the interval and the grid
+    // checks, without a minimum (FINDINGS, "A plan the machine's speed does not change").
+    auto profileProposal = [&]() -> std::optional<std::pair<Eigen::VectorXd, const char*>> {
         const std::vector<std::pair<double, double>> points = fullFidelityProfile(job, state.evaluated);
-        const std::optional<double> vertex = bracketedVertex(points, job.parameters[0].profileInInverse());
-        if (!vertex) return std::nullopt;
+        std::optional<double> proposal = bracketedVertex(points, job.parameters[0].profileInInverse());
+        const char* origin = "parabola";
+        if (!proposal && points.size() > 1) {
+            const auto lowest = std::min_element(points.begin(), points.end(),
+                                                 [](const auto& a, const auto& b) { return a.second < b.second; });
+            const auto [least, most] = std::minmax_element(points.begin(), points.end());
+            const double step = es.standardDeviations()[0];
+            if (lowest->first == most->first) proposal = lowest->first * std::exp(step), origin = "extension";
+            if (lowest->first == least->first) proposal = lowest->first * std::exp(-step), origin = "extension";
+        }
+        if (!proposal) return std::nullopt;
         for (const auto& p : points)
-            if (std::abs(std::log(*vertex / p.first)) < kProposalSpacing) return std::nullopt;
-        return Eigen::VectorXd::Constant(1, std::log(*vertex));
+            if (std::abs(std::log(*proposal / p.first)) < kProposalSpacing) return std::nullopt;
+        return std::make_pair(Eigen::VectorXd::Constant(1, std::log(*proposal)), origin);
     };
 
     // The grid checks need a profile of E near the best full-fidelity evaluation (grid_checks.cpp).
@@ -328,10 +371,12 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const auto genStart = Clock::now();
         std::vector<Eigen::VectorXd> xs = es.ask();
         const bool scan = g == 0 && xs.size() > 1 && (options.startCurve || (coarse && n == 1));
+        const bool refine = g > 0 && coarse && n == 1 && !options.startCurve && xs.size() > 1;
         if (scan) xs = scanPoints(bounds, static_cast<int>(xs.size()), options.startCurve);
-        // Where each point came from, recorded with its evaluation: a CMA-ES sample, a scan point,
-        // or an injected restart point or parabolic proposal.
-        std::vector<std::string> origins(xs.size(), scan ? "scan" : "sample");
+        if (refine) xs = refinePoints(es, bounds, static_cast<int>(xs.size()));
+        // Where each point came from, recorded with its evaluation: a CMA-ES sample, a scan or
+        // refinement point, or an injected restart point or parabolic proposal.
+        std::vector<std::string> origins(xs.size(), scan ? "scan" : refine ? "refine" : "sample");
         // The first full-fidelity generation also scores the restart point, the coarse best, in
         // place of its last sample: with λ = 4 draws of spread ln 1.4, all four can miss the basin
         // the coarse phase found (η = 30: coarse best 28.6, full samples 14.1 / 36.8 / 20.5 / 19.5).
@@ -341,9 +386,9 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             xs.back() = es.mean();
             origins.back() = "restart";
         } else if (!coarse && n == 1) {
-            if (const std::optional<Eigen::VectorXd> proposal = parabolicProposal()) {
-                xs.back() = es.injectable(*proposal);
-                origins.back() = "parabola";
+            if (const auto proposal = profileProposal()) {
+                xs.back() = es.injectable(proposal->first);
+                origins.back() = proposal->second;
             }
         }
         const size_t sampled = xs.size();
@@ -395,8 +440,13 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
                     fields.promote(k, evals[k], batch.gridShift);
             fields.clearStaging();
         }
+        const double refinedSpacing = refine ? std::abs(xs[1][0] - xs[0][0]) : 0.0;
         es.tell({xs.begin(), xs.begin() + sampled}, {fitness.begin(), fitness.begin() + sampled});
         if (scan) restartAlongScan(es, xs, bestK);
+        if (refine)
+            if (const std::optional<BestPoint> coarseBest = bestAt(job, state.evaluated, Fidelity::Coarse))
+                es.restart(Eigen::VectorXd::Constant(1, std::log(coarseBest->theta[0])),
+                           Eigen::VectorXd::Constant(1, std::max(refinedSpacing / 2, 1e-6)));
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         budget.addGeneration(fidelity, genSeconds);
         const std::optional<BestPoint> best = bestAt(job, state.evaluated, fidelity);
@@ -418,20 +468,22 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
         // Phase switch and stopping rules, decided before the checkpoint so a resume agrees.
         const int done = es.generation();
-        if (coarse && done < state.coarseEnd && (maxStd() < coarseTolerance || budget.coarsePhaseOver()))
+        if (coarse && done < state.coarseEnd && maxStd() < kCoarseToFineShift)
             state.coarseEnd = done;
         if (coarse && done == state.coarseEnd) {
             GenerationRecord& last = state.generations.back();
             last.predictedFineGenerationSeconds = budget.fineGenerationSeconds();  // to check it later
-            // The minimum full-fidelity generations run whatever the budget says; when they cannot
-            // fit (a long clip at high η), say so now
-            // and how long the run will take, instead of a remaining time that runs out early.
-            const double fineMinimum = job.fidelity.minFineGenerations * budget.fineGenerationSeconds();
+            // The minimum full-fidelity generations and the grid checks run whatever the budget
+            // says; when they cannot fit (a long clip at high η), say so now and how long the run
+            // will take, instead of a remaining time that runs out early.
+            const double fineMinimum =
+                job.fidelity.minFineGenerations * budget.fineGenerationSeconds() + budget.gridChecksSeconds();
             const double elapsed = budget.elapsed();
             if (job.timeBudget > 0 && elapsed + fineMinimum > job.timeBudget) {
                 last.warning = "time_budget_s: the " + std::to_string(job.fidelity.minFineGenerations) +
-                               " full-fidelity generations every run makes are predicted to take " +
-                               wholeSeconds(fineMinimum) + " s with " +
+                               " full-fidelity generations" +
+                               (gridCheckPlanned(job, GridCheck::Alignment) ? " and the grid checks" : "") +
+                               " every run makes are predicted to take " + wholeSeconds(fineMinimum) + " s with " +
                                wholeSeconds(std::max(0.0, job.timeBudget - elapsed)) + " s of the " +
                                wholeSeconds(job.timeBudget) + " s budget left; the run will end after about " +
                                wholeSeconds(elapsed + fineMinimum) +
@@ -450,8 +502,8 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             else if (job.forwardModel == ForwardModel::Simulation && fineDone >= settledGenerations(job) &&
                      settled(state.evaluated, done, settledGenerations(job), job.toleranceFun) && (n > 1 || checksCanRun()))
                 state.stop = StopReason::ToleranceFun;
-            else if (job.forwardModel == ForwardModel::Simulation && n > 1 && fineDone >= settledGenerations(job) &&
-                     resolved(state.generations, state.evaluated, bounds, done, settledGenerations(job)))
+            else if (job.forwardModel == ForwardModel::Simulation && fineDone >= settledGenerations(job) &&
+                     resolved(job, state.generations, state.evaluated, bounds, done, settledGenerations(job)))
                 state.stop = StopReason::Resolved;
         }
         if (!state.stop && done >= job.maxGenerations) state.stop = StopReason::MaxGenerations;
@@ -496,12 +548,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
     for (int i = 0; i < n; ++i) {
         ParameterEstimate estimate = estimateParameter(job, bounds, es, state.evaluated, i, best->theta[i], joint);
         if (gridCheckPlanned(job, GridCheck::Alignment))
-            estimate.alignment =
-                alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, budget, save);
+            estimate.alignment = alignmentCheck(job, pool, observations, state, estimate.profile, estimate.value, save);
         if (gridCheckPlanned(job, GridCheck::Resolution))
             estimate.resolution = resolutionCheck(job, pool, observations, state, estimate.profile, estimate.value,
-                                                  *estimate.alignment, budget, save);
-        // Skipped for the budget, the interval leaves out the grid's share: the result is doubted.
+                                                  *estimate.alignment, save);
+        // Skipped for want of a profile, the interval leaves out the grid's share: the result is doubted.
         for (const std::optional<GridCheckOutcome>* check : {&estimate.alignment, &estimate.resolution})
             if (*check && (*check)->warning) {
                 doubts.push_back(*(*check)->warning);
@@ -524,6 +575,14 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
 
     for (const GenerationRecord& g : state.generations)
         if (!g.warning.empty()) warnings.push_back(g.warning);
+    if (result.stop == StopReason::TimeBudget) {
+        const std::string line = "time_budget_s: the search was stopped by the budget (" +
+                                 wholeSeconds(job.timeBudget) + " s) after " + std::to_string(result.generations) +
+                                 " generations, before its own criteria ended it: θ* and its interval are unconverged "
+                                 "(a larger budget, or 0 for none, goes on from the checkpoint)";
+        warn(line);
+        doubts.push_back(line);
+    }
     for (const std::string& line : doubtsAfterSearch(job, bounds, result.interval, state.evaluated)) {
         warn(line);
         doubts.push_back(line);

@@ -41,8 +41,8 @@ struct FixedParameter {
 struct FidelitySchedule {
     // Generations [0, coarseGenerations) simulate on the grid round(coarseFactor · resolution) and
     // only the first coarseTimeShare of the compared clip; the rest at the job's resolution over all
-    // of it. The coarse phase ends early when its σ tolerance is met (or the time budget needs the
-    // rest). At the switch CMA-ES restarts at the best coarse θ with a fixed log-space spread, and
+    // of it. The coarse phase ends early once its search is narrower than the full-fidelity phase's
+    // restart spread (see the fidelity policy in identification.cpp). At the switch CMA-ES restarts at the best coarse θ with a fixed log-space spread, and
     // the best-so-far is reset, because E values of the two fidelities are not comparable.
     // Stopping tolerances apply only at full fidelity, and at least `minFineGenerations` run there.
     double coarseFactor = 1;
@@ -125,10 +125,11 @@ struct Job {
     // (one per placement taken by generation, at least two) each generation's median E lies within
     // this share of its least (see settled in identification.cpp).
     double toleranceFun = 0.05;
-    // Wall seconds for the whole identification (0 = none). The coarse phase ends by kCoarseBudgetShare
-    // of it, and after the minimum fine generations no generation starts that is
-    // predicted to end past it (from the mean time of the fine generations so far, with a margin).
-    // With a budget the result depends on the machine's speed.
+    // Wall seconds for the whole identification (0 = none): a cap, not a plan. After the minimum
+    // fine generations no generation starts that is predicted to end past it with the grid checks
+    // (from the mean time of the fine generations so far, with a margin); a search it stops is
+    // doubted as unconverged. Everything else (the coarse phase, the minimum generations, the grid
+    // checks) runs alike on any machine.
     double timeBudget = 0;
     int maxFrames = 0;          // use only the first N weighted reference frames (0 = all)
     // Mesh + fill ("exact", the default) or the band splat ("fast"). The splat fills every pixel a

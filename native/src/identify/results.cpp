@@ -154,9 +154,9 @@ std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationReco
 }
 
 std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
-                                      json& info) {
-    std::optional<ProfileFit> profile =
-        fitProfile(fullFidelityProfile(job, evaluated), value, kProfileRange, job.parameters[0].profileInInverse(), info);
+                                      json& info, int lastGeneration) {
+    std::optional<ProfileFit> profile = fitProfile(fullFidelityProfile(job, evaluated, lastGeneration), value,
+                                                   kProfileRange, job.parameters[0].profileInInverse(), info);
     // A vertex beyond the fitted points is an extrapolation, and so is its band
     // (tests/bench/FINDINGS.md, "The profile interval").
     if (profile && !profile->vertexAmongPoints) profile.reset();

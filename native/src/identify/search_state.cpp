@@ -193,10 +193,12 @@ bool placementsByGeneration(const Job& job) {
     return job.placementSchedule == PlacementSchedule::ByGeneration && job.gridPlacements > 1 && job.parameters.size() == 1;
 }
 
-std::vector<std::pair<double, double>> fullFidelityProfile(const Job& job, const std::vector<EvaluationRecord>& evaluated) {
+std::vector<std::pair<double, double>> fullFidelityProfile(const Job& job, const std::vector<EvaluationRecord>& evaluated,
+                                                          int lastGeneration) {
     std::vector<PlacedPoint> points;
     for (const EvaluationRecord& e : evaluated)
-        if (e.fidelity == Fidelity::Full && e.succeeded()) points.push_back({e.theta()[0], e.E(), e.gridShift});
+        if (e.fidelity == Fidelity::Full && e.succeeded() && e.generation <= lastGeneration)
+            points.push_back({e.theta()[0], e.E(), e.gridShift});
     if (placementsByGeneration(job)) return placementMeanProfile(points, job.parameters[0].profileInInverse());
     std::vector<std::pair<double, double>> plain;
     for (const PlacedPoint& p : points) plain.emplace_back(p.theta, p.E);

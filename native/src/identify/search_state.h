@@ -13,6 +13,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <optional>
 #include <string>
 #include <utility>
@@ -51,7 +52,7 @@ struct EvaluationRecord {
     Fidelity fidelity = Fidelity::Full;
     int frames = 0;
     std::vector<double> x;  // the optimizer's point, ln θ before clipping into the bounds
-    std::string origin;     // "sample", "scan", "restart" or "parabola"
+    std::string origin;     // "sample", "scan", "refine", "restart", "parabola" or "known"
     double gridShift = 0;   // cells along x and y
     std::string error;      // why the simulation failed (E = ∞)
     std::optional<int> rank;
@@ -129,9 +130,10 @@ private:
 
 // Full-fidelity generations take turns on the job's grid placements (Job::placementSchedule).
 bool placementsByGeneration(const Job& job);
-// (θ, E) of the finished full-fidelity evaluations of a one-parameter search; with placements by
-// generation, E's mean over them (placementMeanProfile).
-std::vector<std::pair<double, double>> fullFidelityProfile(const Job& job, const std::vector<EvaluationRecord>& evaluated);
+// (θ, E) of the finished full-fidelity evaluations of a one-parameter search, up to generation
+// `lastGeneration`; with placements by generation, E's mean over them (placementMeanProfile).
+std::vector<std::pair<double, double>> fullFidelityProfile(const Job& job, const std::vector<EvaluationRecord>& evaluated,
+                                                          int lastGeneration = std::numeric_limits<int>::max());
 // The best θ at a fidelity: the lowest evaluation, or at full fidelity with placements by
 // generation the lowest point of E's mean over them; none before a finite E.
 std::optional<BestPoint> bestAt(const Job& job, const std::vector<EvaluationRecord>& evaluated, Fidelity fidelity);
@@ -156,13 +158,10 @@ public:
     // A grid check's evaluations, with the margin the minimum generations get; 0 when none is planned.
     double checkSeconds(GridCheck check) const;
     double gridChecksSeconds() const;  // both
-    // The coarse phase must end: another coarse generation would pass its share of the budget or
-    // the time the minimum full-fidelity generations and the grid checks need.
-    bool coarsePhaseOver() const;
-    // The last full-fidelity generation has run: another would end past the budget, with the grid
-    // checks when they could run now (`checksCanRun`: a profile to take E's curvature from). Without
-    // one the budget goes to another generation, which may give the profile, rather than to checks
-    // that would be skipped.
+    // The last full-fidelity generation has run: the minimum generations have, and another would
+    // end past the budget, with the grid checks when they could run now (`checksCanRun`: a profile to
+    // take E's curvature from). Without one the minimum doubles, so that the checks the plan holds
+    // are not dropped for want of a profile a generation or two more would give.
     bool fullPhaseOver(bool checksCanRun) const;
     // Seconds of the search left after `done` generations (of which coarseEnd coarse).
     double remaining(int done, bool stopped) const;
@@ -207,19 +206,19 @@ struct GridCheckOutcome {
     // How far the interval reaches either side of θ*, in ln θ: alignment |ln(θ_s/θ*)|, infinite when
     // the moved minimum is; resolution (h/(h_c − h))·(|ln(θ_s/θ_c)| + z·σ), σ that move's noise.
     std::optional<double> widening;
-    std::optional<std::string> warning;  // skipped for the budget, or a doubt on θ*
+    std::optional<std::string> warning;  // skipped (no profile, no coarser grid), or a doubt on θ*
     double seconds = 0;                  // simulated in this session
 };
 // Each runs its check's evaluations unless `state` holds them for θ* (then takes them from there),
-// storing them in `state` and calling `saved` after. Without a profile, or when they do not fit the
-// budget, it is skipped and says why.
+// storing them in `state` and calling `saved` after. Without a profile it is skipped and says why;
+// the time budget never skips it: the checks are part of the plan the budget is held against (see
+// TimeBudget::fullPhaseOver).
 GridCheckOutcome alignmentCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                 SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
-                                const TimeBudget& budget, const std::function<void()>& saved);
+                                const std::function<void()>& saved);
 GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Observations& observations,
                                  SearchState& state, const std::optional<ProfileFit>& profile, double thetaStar,
-                                 const GridCheckOutcome& alignment, const TimeBudget& budget,
-                                 const std::function<void()>& saved);
+                                 const GridCheckOutcome& alignment, const std::function<void()>& saved);
 // The resolution check's grid: cells along the longest axis.
 int resolutionCheckCells(const Job& job);
 
@@ -247,10 +246,11 @@ ParameterEstimate estimateParameter(const Job& job, const LogSearchSpace& bounds
 // its account.
 std::optional<JointProfileFit> jointProfileNear(const std::vector<EvaluationRecord>& evaluated, int lastGeneration,
                                                 const std::vector<double>& best, nlohmann::json& info);
-// The profile fit of a one-parameter search's full-fidelity evaluations around θ* = `value`, kept
-// when its vertex lies among the fitted points; `info` receives fitProfile's account.
+// The profile fit of a one-parameter search's full-fidelity evaluations (up to generation
+// `lastGeneration`) around θ* = `value`, kept when its vertex lies among the fitted points; `info`
+// receives fitProfile's account.
 std::optional<ProfileFit> profileNear(const Job& job, const std::vector<EvaluationRecord>& evaluated, double value,
-                                      nlohmann::json& info);
+                                      nlohmann::json& info, int lastGeneration = std::numeric_limits<int>::max());
 // The interval reported: the profile's band (or the joint profile's) when there is one, else the
 // CMA band, widened by each grid check's reach, made to contain θ*, and clipped into the bounds.
 void settleInterval(ParameterEstimate& estimate, const LogSearchSpace& bounds, int i);

@@ -7,15 +7,6 @@ namespace viscoscope::identify {
 
 namespace {
 
-// With a time budget, the coarse phase may use at most kCoarseBudgetShare of it, and no more than
-// leaves time for the minimum full-fidelity generations. The reservation alone once left the coarse
-// phase a single generation in a 10-minute run (its prediction from a coarser grid ran high); hence
-// the cap. Half the budget was too much once the grid placements took turns by generation: each
-// placement then gets every other full generation, and a long coarse phase left the half-cell
-// placement a single one. Scaled by the frame count alone, the prediction ran low instead (the
-// first frames are the cheapest); see predictedFullEvaluationSeconds for the better prediction.
-// The figures: tests/bench/FINDINGS.md, "Figures moved from code comments".
-constexpr double kCoarseBudgetShare = 0.35;
 // Generations are predicted with this margin: without it, a generation that ran past the mean of
 // those before it ended a run past its budget, and so did an alignment check that took longer than
 // half the mean full-fidelity generation (FINDINGS, "Figures moved from code comments").
@@ -103,16 +94,12 @@ double TimeBudget::gridChecksSeconds() const {
     return checkSeconds(GridCheck::Alignment) + checkSeconds(GridCheck::Resolution);
 }
 
-bool TimeBudget::coarsePhaseOver() const {
-    if (job_.timeBudget <= 0) return false;
-    const double reserved = job_.fidelity.minFineGenerations * kFineTimeMargin * fineGenerationSeconds() +
-                            gridChecksSeconds();
-    return elapsed() + coarseGenerationSeconds() >
-           std::min(kCoarseBudgetShare * job_.timeBudget, job_.timeBudget - reserved);
-}
-
 bool TimeBudget::fullPhaseOver(bool checksCanRun) const {
-    return state_.es.generation() - state_.coarseEnd >= job_.fidelity.minFineGenerations &&
+    // The grid checks are part of every run's plan: while no profile lets them run, up to twice the
+    // minimum full-fidelity generations run whatever the budget says.
+    const bool awaitingProfile = gridCheckPlanned(job_, GridCheck::Alignment) && !checksCanRun;
+    const int minimum = job_.fidelity.minFineGenerations * (awaitingProfile ? 2 : 1);
+    return state_.es.generation() - state_.coarseEnd >= minimum &&
            !fits(kFineTimeMargin * fineGenerationSeconds() + (checksCanRun ? gridChecksSeconds() : 0.0));
 }
 
