@@ -4,8 +4,8 @@ fine as the Identify panel's, with another particle seed, and Cycles renders it 
 in view), then the panel's own operators with its defaults: Preview Silhouettes and Identify
 Viscosity, no mask drawn by hand. The cup hides the liquid inside it from the camera; a silhouette
 drawn as if it were glass made this return an η far too high, with an interval spanning the search
-bounds. Only the generations are cut to fit CI; with no time budget (the panel's default) the
-search takes the same path on any machine.
+bounds. Nothing is cut to fit CI: with no time budget (the panel's default) the search ends when it
+settles or after the panel's Max Generations, on the same path on any machine.
 
 What it asks is η* within 15 % of the truth, an interval bounded by the footage that holds the
 truth, and no doubts. The clip is simulated on a finer grid than the panel's, so η* carries the
@@ -26,7 +26,6 @@ import conftest
 pytestmark = pytest.mark.capture
 
 TRUTH = 8.0  # Pa·s: the capture scene's honey, which its clip is simulated with
-BUDGET_MINUTES, GENERATIONS = 0.0, 8
 SEARCH_TIMEOUT_S = 2700
 
 IDENTIFY_SCRIPT = textwrap.dedent('''
@@ -36,11 +35,10 @@ IDENTIFY_SCRIPT = textwrap.dedent('''
     import _common
     _common.enable_addon()
     from viscoscope.operators.identify import identify_dir
-    work, budget, generations = sys.argv[-3], float(sys.argv[-2]), int(sys.argv[-1])
+    work = sys.argv[-1]
     scene = bpy.context.scene
     vs = scene.viscoscope
     vs.work_dir = work
-    vs.time_budget_minutes, vs.max_generations = budget, generations
     fluid_before = vs.fluid.viscosity
     preview = bpy.ops.viscoscope.preview_silhouettes('EXEC_DEFAULT')
     identified = bpy.ops.viscoscope.identify('EXEC_DEFAULT')
@@ -66,7 +64,7 @@ def test_identify_on_the_capture_clip_with_the_panel_defaults(tmp_path, engine_p
     script.write_text(IDENTIFY_SCRIPT)
     work = tmp_path / "work"
     _blender(str(tmp_path / "capture.blend"), "--python", str(script), "--", conftest.REPO, str(work),
-             str(BUDGET_MINUTES), str(GENERATIONS), timeout=SEARCH_TIMEOUT_S)
+             timeout=SEARCH_TIMEOUT_S)
     summary = json.loads((work / "summary.json").read_text())
     assert summary["preview"] == ["FINISHED"] and summary["identify"] == ["FINISHED"], summary
     result = json.loads(open(os.path.join(summary["out"], "result.json")).read())
@@ -80,7 +78,11 @@ def test_identify_on_the_capture_clip_with_the_panel_defaults(tmp_path, engine_p
     # frame, and no exclusion.
     assert "exclude_mask" not in job["extraction"] and job["extraction"]["clean_plate_frame"] == 0, job
     assert result["doubts"] == [], result["doubts"]
-    assert 1e-3 < low and high < 1e4 and high / low < 4, (low, high)  # bounded by the footage
+    # Bounded by the footage: far inside the search's bounds and its first scan's span (a factor 81).
+    # The interval always carries both grid checks; on this clip at 60³ the resolution check's
+    # reach is mostly its move's noise, carried four times to a continuum (tests/bench/FINDINGS.md,
+    # "A plan the machine's speed does not change").
+    assert 1e-3 < low and high < 1e4 and high / low < 8, (low, high)
     assert abs(eta / TRUTH - 1) < 0.15
     assert low <= TRUTH <= high, (low, high, result["viscosity"].get("resolution_check"))
     # A result without doubts becomes the Fluid Material's η.

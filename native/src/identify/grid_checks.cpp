@@ -44,8 +44,11 @@ constexpr unsigned kAlignmentSeedOffset = 1;
 // carried four times as far to a continuum.
 constexpr double kCoarserCells = 0.8;
 constexpr double kNinetyPercentZ = 1.645;
-// A grid error beyond this (in ln θ, ln 1.5) is a doubt on θ*: it then outweighs the scatter the
-// interval otherwise holds.
+// A measured grid error beyond this (in ln θ, ln 1.5), the move carried to a continuum, is a doubt
+// on θ*: it then outweighs the scatter the interval otherwise holds. The move's noise widens the
+// interval but is no reason to think θ* wrong: a check that cannot measure the move says the
+// interval is wide, not that the minimum moved (FINDINGS, "A plan the machine's speed does not
+// change").
 constexpr double kResolutionDoubt = 0.405;
 
 struct GridCheckSpec {
@@ -184,11 +187,11 @@ GridCheckOutcome resolutionCheck(const Job& job, EvaluationPool& pool, const Obs
     outcome.entry["move_ln"] = move;
     outcome.entry["move_noise_ln"] = noise;
     outcome.entry["error_ln"] = *outcome.widening;
-    if (*outcome.widening > kResolutionDoubt)
+    if (reach * move > kResolutionDoubt)
         outcome.warning = "resolution_check: the minimum moves from " + formatNumber(*outcome.minimum) + " on " +
                           std::to_string(cells) + " cells to " + formatNumber(*alignment.minimum) + " on " +
                           std::to_string(job.resolution) + ", a grid error of a factor " +
-                          formatNumber(std::exp(*outcome.widening)) + " against a continuum: the grid is too coarse "
+                          formatNumber(std::exp(reach * move)) + " against a continuum: the grid is too coarse "
                           "for θ* (a finer grid would tell)";
     return outcome;
 }
