@@ -42,8 +42,9 @@ struct FidelitySchedule {
     // Generations [0, coarseGenerations) simulate on the grid round(coarseFactor · resolution) and
     // only the first coarseTimeShare of the compared clip; the rest at the job's resolution over all
     // of it. The coarse phase ends early once its search is narrower than the full-fidelity phase's
-    // restart spread (see the fidelity policy in identification.cpp). At the switch CMA-ES restarts at the best coarse θ with a fixed log-space spread, and
-    // the best-so-far is reset, because E values of the two fidelities are not comparable.
+    // restart spread (see the fidelity policy in identification.cpp). At the switch CMA-ES restarts
+    // at the best coarse θ with a fixed log-space spread, and the best-so-far is reset, because E
+    // values of the two fidelities are not comparable.
     // Stopping tolerances apply only at full fidelity, and at least `minFineGenerations` run there.
     double coarseFactor = 1;
     double coarseTimeShare = 1.0 / 3;
