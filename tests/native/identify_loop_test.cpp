@@ -434,22 +434,23 @@ TEST_F(IdentifyLoop, ABudgetCutsTheSearchShortButNeverChangesItsPath) {
     EXPECT_GE(result.generations, coarse + 2);
     EXPECT_LE(result.generations, coarse + 4);
 
-    json unbudgeted = doc;
-    unbudgeted["time_budget_s"] = 0;
-    unbudgeted["max_generations"] = result.generations;
-    const identify::IdentificationResult free = identify::identify(job(unbudgeted), dir_ / "unbudgeted_out", options);
-    EXPECT_EQ(free.document.at("coarse_generations").get<int>(), coarse);
-    EXPECT_EQ(free.stop, identify::StopReason::MaxGenerations);
+    json unbudgetedDoc = doc;
+    unbudgetedDoc["time_budget_s"] = 0;
+    unbudgetedDoc["max_generations"] = result.generations;
+    const identify::IdentificationResult unbudgeted =
+        identify::identify(job(unbudgetedDoc), dir_ / "unbudgeted_out", options);
+    EXPECT_EQ(unbudgeted.document.at("coarse_generations").get<int>(), coarse);
+    EXPECT_EQ(unbudgeted.stop, identify::StopReason::MaxGenerations);
     const json& scored = result.document.at("evaluated");
-    const json& freeScored = free.document.at("evaluated");
-    ASSERT_EQ(freeScored.size(), scored.size());
+    const json& unbudgetedScored = unbudgeted.document.at("evaluated");
+    ASSERT_EQ(unbudgetedScored.size(), scored.size());
     for (size_t k = 0; k < scored.size(); ++k) {
-        EXPECT_EQ(freeScored[k].at("theta"), scored[k].at("theta")) << "evaluation " << k;
-        EXPECT_EQ(freeScored[k].at("E"), scored[k].at("E")) << "evaluation " << k;
+        EXPECT_EQ(unbudgetedScored[k].at("theta"), scored[k].at("theta")) << "evaluation " << k;
+        EXPECT_EQ(unbudgetedScored[k].at("E"), scored[k].at("E")) << "evaluation " << k;
     }
-    EXPECT_EQ(free.theta, result.theta);
-    EXPECT_EQ(free.interval, result.interval);
-    EXPECT_EQ(budgetLines(free.document.at("doubts")), 0);
+    EXPECT_EQ(unbudgeted.theta, result.theta);
+    EXPECT_EQ(unbudgeted.interval, result.interval);
+    EXPECT_EQ(budgetLines(unbudgeted.document.at("doubts")), 0);
     fs::remove_all(dir_ / "unbudgeted_out");
 
     const identify::IdentificationResult again = identify::identify(job(doc), out, options);

@@ -432,9 +432,10 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
             if (!ran.ranks.empty()) record.rank = ran.ranks[k];
             state.evaluated.push_back(std::move(record));
         }
+        // The best so far at this generation's fidelity (E of the two fidelities are not comparable).
+        const std::optional<BestPoint> best = bestAt(job, state.evaluated, fidelity);
         if (stageFields) {
             // The new best full-fidelity evaluation, if this generation made it, keeps its fields.
-            const std::optional<BestPoint> best = bestAt(job, state.evaluated, Fidelity::Full);
             for (size_t k = 0; k < xs.size(); ++k)
                 if (best && best->theta == evals[k].theta && best->gridShift == batch.gridShift && evals[k].fields)
                     fields.promote(k, evals[k], batch.gridShift);
@@ -443,13 +444,11 @@ IdentificationResult identify(const Job& jobIn, const fs::path& outDir, const Id
         const double refinedSpacing = refine ? std::abs(xs[1][0] - xs[0][0]) : 0.0;
         es.tell({xs.begin(), xs.begin() + sampled}, {fitness.begin(), fitness.begin() + sampled});
         if (scan) restartAlongScan(es, xs, bestK);
-        if (refine)
-            if (const std::optional<BestPoint> coarseBest = bestAt(job, state.evaluated, Fidelity::Coarse))
-                es.restart(Eigen::VectorXd::Constant(1, std::log(coarseBest->theta[0])),
-                           Eigen::VectorXd::Constant(1, std::max(refinedSpacing / 2, 1e-6)));
+        if (refine && best)  // at the best coarse point
+            es.restart(Eigen::VectorXd::Constant(1, std::log(best->theta[0])),
+                       Eigen::VectorXd::Constant(1, std::max(refinedSpacing / 2, 1e-6)));
         const double genSeconds = std::chrono::duration<double>(Clock::now() - genStart).count();
         budget.addGeneration(fidelity, genSeconds);
-        const std::optional<BestPoint> best = bestAt(job, state.evaluated, fidelity);
         const Eigen::VectorXd sd = es.standardDeviations();
         GenerationRecord generation;
         generation.generation = g + 1;
